@@ -1,0 +1,74 @@
+#pragma once
+
+#include <ivdb/implicit/Implicit.h>
+
+#include <vector>
+
+namespace ivdb::implicit {
+
+/// @brief Sharp CSG over any number of children (seed eqs. 1-3).
+/// @details Union = min, intersection = max, difference = max(A, -B1, -B2, ...). The result is
+/// not an exact distance near creases, so the rasterizer re-distances it. prune() drops the
+/// children that cannot decide the result inside a box, which keeps a union of many shapes
+/// cheap per voxel (libfive's and Fidget's per-region simplification).
+class Csg final: public Implicit
+{
+public:
+    enum class Op { Union, Intersection, Difference };
+
+    /// @throw openvdb::ValueError if @a children is empty or holds a null pointer
+    Csg(Op op, std::vector<Ptr> children);
+
+    double value(const Vec3d& p) const override;
+    Vec3d gradient(const Vec3d& p) const override;
+    void values(const double* x, const double* y, const double* z, double* out,
+                std::size_t n) const override;
+    Interval interval(const BBoxd& box) const override;
+    BBoxd boundingBox() const override;
+    bool isExactSdf() const override;
+    Ptr prune(const BBoxd& box) const override;
+    std::string typeName() const override;
+
+    Op op() const { return mOp; }
+    const std::vector<Ptr>& children() const { return mChildren; }
+
+private:
+    Op mOp;
+    std::vector<Ptr> mChildren;
+};
+
+/// @brief Rigid motion and scale of a child: p = R S q + t, with R = Rz Ry Rx.
+/// @details The value is min(scale) * child(q): an exact SDF stays exact under uniform scale,
+/// and a non-uniform scale keeps the sign and the Lipschitz bound (then it is re-distanced).
+class Transform final: public Implicit
+{
+public:
+    /// @param rotateDeg  rotations about x, then y, then z (fixed axes), in degrees
+    /// @throw openvdb::ValueError if a scale component is <= 0 or any input is not finite
+    Transform(Ptr child, const Vec3d& translate, const Vec3d& rotateDeg, const Vec3d& scale);
+
+    double value(const Vec3d& p) const override;
+    Vec3d gradient(const Vec3d& p) const override;
+    void values(const double* x, const double* y, const double* z, double* out,
+                std::size_t n) const override;
+    Interval interval(const BBoxd& box) const override;
+    BBoxd boundingBox() const override;
+    bool isExactSdf() const override;
+    Ptr prune(const BBoxd& box) const override;
+    std::string typeName() const override { return "transform"; }
+
+    /// @brief The child-space point of world point @a p.
+    Vec3d toLocal(const Vec3d& p) const;
+    /// @brief The world point of child-space point @a q.
+    Vec3d toWorld(const Vec3d& q) const;
+
+private:
+    Transform(Ptr child, const Transform& like);
+
+    Ptr mChild;
+    Vec3d mTranslate, mScale;
+    double mRot[3][3];   // R, row-major
+    double mValueScale;  // min(scale)
+};
+
+} // namespace ivdb::implicit

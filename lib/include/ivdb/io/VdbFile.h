@@ -1,0 +1,46 @@
+#pragma once
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace ivdb::io {
+
+/// @brief Fail early, before a long computation, if @a path cannot become an output file: its
+/// folder must exist and be writable, and @a path must not be a folder.
+/// @throw openvdb::IoError naming the path and the reason
+void checkOutputPath(const std::string& path);
+
+/// @brief Write @a grids to @a path with OpenVDB's default compression, atomically.
+/// @details The grids go to a temporary file in the same folder (`.NAME.tmp-PID-N`), which is
+/// flushed, synced and renamed over @a path: a failure (a full disk, say) or a kill leaves
+/// either the old file or the complete new one, never a partial file, and no temporary file
+/// after an error. Every stream error is checked, unlike io::File::write.
+/// @throw openvdb::IoError naming the path and the reason
+void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
+              const openvdb::MetaMap& fileMetadata = openvdb::MetaMap());
+
+/// @brief Read every grid of a .vdb file, fully loaded.
+/// @throw openvdb::IoError naming the path if it is missing, a folder, not a .vdb file,
+/// truncated or corrupt
+openvdb::GridPtrVec readVdb(const std::string& path);
+
+/// @brief What `ivdb info` reports about a grid.
+struct GridInfo
+{
+    std::string name, gridClass, valueType;
+    openvdb::Vec3d voxelSize;
+    std::uint64_t activeVoxels = 0, leafNodes = 0;
+    openvdb::CoordBBox indexBox;   // of the active voxels; empty if none
+    openvdb::BBoxd worldBox;       // of the active voxels' centers
+    std::uint64_t memoryBytes = 0; // in-core size of the tree
+    bool isLevelSet = false;
+    double background = 0.0;       // for scalar grids
+};
+
+/// @brief Describe a grid (fully loaded).
+GridInfo describeGrid(const openvdb::GridBase& grid);
+
+} // namespace ivdb::io

@@ -1,0 +1,61 @@
+#pragma once
+
+#include <ivdb/implicit/Implicit.h>
+
+#include <openvdb/openvdb.h>
+#include <openvdb/util/NullInterrupter.h>
+
+#include <cstdint>
+#include <optional>
+
+namespace ivdb::raster {
+
+/// @brief How the rasterizer finds the narrow band.
+enum class Sampling {
+    /// Top-down over OpenVDB's node sizes with interval bounds: cost grows with the surface.
+    Sparse,
+    /// Every voxel of the bounding box: the reference and the benchmark baseline.
+    Dense
+};
+
+struct RasterSettings
+{
+    /// World units per voxel; must be > 0.
+    double voxelSize = 0.0;
+    /// Half width of the narrow band in voxels; must be >= 1.
+    double halfWidth = 3.0;
+    Sampling sampling = Sampling::Sparse;
+    /// Clipping box in world units: the shape is intersected with it. Required for unbounded
+    /// shapes; a bounded shape that lies well inside it is left as it is.
+    std::optional<implicit::BBoxd> bounds;
+    /// Run on all TBB threads (true) or on one.
+    bool threaded = true;
+    /// Progress and cancellation (may be null). Cancellation throws openvdb::RuntimeError.
+    openvdb::util::NullInterrupter* interrupter = nullptr;
+    /// Memory the dense path may use, in bytes; 0 means the machine's available memory.
+    std::uint64_t denseMemoryLimit = 0;
+};
+
+/// @brief Rasterize @a shape into a narrow-band level set.
+/// @details The result is a FloatGrid of class LEVEL_SET named "surface" with a linear
+/// transform of the voxel size (voxel (i,j,k) at world (i,j,k) * voxelSize), background
+/// halfWidth * voxelSize, active voxels exactly those whose signed distance is within the band
+/// (|d| < background), negative inside (inactive voxels and tiles -background). Shapes whose
+/// value is an exact distance are stored as is (rounded to float); others (quadrics, CSG) are
+/// estimated as f / |grad f| next to the surface and re-distanced by fast sweeping.
+/// Sparse and dense sampling give the same active voxels and values.
+/// @throw openvdb::ValueError for a bad setting or an unbounded shape without bounds
+/// @throw openvdb::RuntimeError if dense sampling would not fit in memory
+/// @throw openvdb::RuntimeError if the interrupter cancels the run
+openvdb::FloatGrid::Ptr rasterize(const implicit::Implicit::Ptr& shape,
+                                  const RasterSettings& settings);
+
+/// @brief The shape that is rasterized: @a shape clipped by the settings' bounds when needed.
+implicit::Implicit::Ptr clipToBounds(const implicit::Implicit::Ptr& shape,
+                                     const RasterSettings& settings);
+
+/// @brief Bytes the dense path allocates for @a shape (its sample array).
+std::uint64_t denseMemoryEstimate(const implicit::Implicit::Ptr& shape,
+                                  const RasterSettings& settings);
+
+} // namespace ivdb::raster

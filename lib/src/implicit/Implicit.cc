@@ -1,0 +1,32 @@
+#include <ivdb/implicit/Implicit.h>
+
+#include <limits>
+
+namespace ivdb::implicit {
+
+BBoxd infiniteBox()
+{
+    const double inf = std::numeric_limits<double>::infinity();
+    return BBoxd(Vec3d(-inf), Vec3d(inf));
+}
+
+bool isFinite(const BBoxd& box)
+{
+    for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(box.min()[i]) || !std::isfinite(box.max()[i])) return false;
+    }
+    return true;
+}
+
+void Implicit::values(const double* x, const double* y, const double* z, double* out,
+                      std::size_t n) const
+{
+    for (std::size_t i = 0; i < n; ++i) out[i] = value(Vec3d(x[i], y[i], z[i]));
+}
+
+Implicit::Ptr Implicit::prune(const BBoxd&) const
+{
+    return shared_from_this();
+}
+
+} // namespace ivdb::implicit

@@ -1,0 +1,281 @@
+#include <ivdb/implicit/Quadric.h>
+
+#include <openvdb/Exceptions.h>
+
+#include <cmath>
+#include <sstream>
+
+namespace ivdb::implicit {
+
+namespace {
+
+inline double quadricValue(const Mat4& q, double x, double y, double z)
+{
+    // p^T A p + 2 b.p + c, written out so value() and values() round identically.
+    return x * (q[0][0] * x + 2.0 * (q[0][1] * y + q[0][2] * z + q[0][3]))
+         + y * (q[1][1] * y + 2.0 * (q[1][2] * z + q[1][3]))
+         + z * (q[2][2] * z + 2.0 * q[2][3]) + q[3][3];
+}
+
+double det3(const double m[3][3])
+{
+    return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+}
+
+void requirePositive(double v, const char* what)
+{
+    if (!(v > 0.0) || !std::isfinite(v)) {
+        std::ostringstream os;
+        os << what << " must be > 0 and finite, got " << v;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+}
+
+void requireFinite(const Vec3d& v, const char* what)
+{
+    for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(v[i])) {
+            std::ostringstream os;
+            os << what << " must be finite";
+            OPENVDB_THROW(openvdb::ValueError, os.str());
+        }
+    }
+}
+
+Mat4 diagonal(double a, double b, double c, double d)
+{
+    Mat4 q{};
+    q[0][0] = a; q[1][1] = b; q[2][2] = c; q[3][3] = d;
+    return q;
+}
+
+} // namespace
+
+Quadric::Quadric(const Mat4& q): mQ(q), mBox(infiniteBox())
+{
+    double scale = 0.0;
+    for (int i = 0; i < 4; ++i) {
+        for (int j = 0; j < 4; ++j) {
+            if (!std::isfinite(q[i][j])) {
+                std::ostringstream os;
+                os << "quadric matrix[" << i << "][" << j << "] must be finite, got " << q[i][j];
+                OPENVDB_THROW(openvdb::ValueError, os.str());
+            }
+            scale = std::max(scale, std::abs(q[i][j]));
+        }
+    }
+    if (scale == 0.0) OPENVDB_THROW(openvdb::ValueError, "quadric matrix is all zero: no surface");
+    for (int i = 0; i < 4; ++i) {
+        for (int j = i + 1; j < 4; ++j) {
+            if (std::abs(q[i][j] - q[j][i]) > 1e-12 * scale) {
+                std::ostringstream os;
+                os << "quadric matrix must be symmetric, got matrix[" << i << "][" << j
+                   << "] = " << q[i][j] << " but matrix[" << j << "][" << i << "] = " << q[j][i];
+                OPENVDB_THROW(openvdb::ValueError, os.str());
+            }
+        }
+    }
+    // Symmetrize exactly so value and gradient agree.
+    for (int i = 0; i < 4; ++i) {
+        for (int j = i + 1; j < 4; ++j) mQ[i][j] = mQ[j][i] = 0.5 * (q[i][j] + q[j][i]);
+    }
+
+    const double a[3][3] = {{mQ[0][0], mQ[0][1], mQ[0][2]},
+                            {mQ[1][0], mQ[1][1], mQ[1][2]},
+                            {mQ[2][0], mQ[2][1], mQ[2][2]}};
+    double aScale = 0.0;
+    for (auto& row : a) for (double v : row) aScale = std::max(aScale, std::abs(v));
+    if (aScale == 0.0) {
+        const double n = 2.0 * std::sqrt(mQ[0][3] * mQ[0][3] + mQ[1][3] * mQ[1][3] +
+                                         mQ[2][3] * mQ[2][3]);
+        mIsPlaneSdf = std::abs(n - 1.0) < 1e-12;
+        if (n == 0.0) {
+            // f is the constant c: everywhere inside or everywhere outside, no surface.
+            OPENVDB_THROW(openvdb::ValueError,
+                "quadric matrix is constant (only matrix[3][3] is non-zero): no surface");
+        }
+        return;
+    }
+    // Bounded iff A is positive definite (Sylvester's criterion): an ellipsoid, or empty.
+    const double m1 = a[0][0], m2 = a[0][0] * a[1][1] - a[0][1] * a[1][0], m3 = det3(a);
+    const double tol = 1e-14;
+    if (m1 > tol * aScale && m2 > tol * aScale * aScale && m3 > tol * aScale * aScale * aScale) {
+        // Inverse of A by cofactors; center m = -A^-1 b; k = f(m) = c - b^T A^-1 b.
+        double inv[3][3];
+        inv[0][0] = (a[1][1] * a[2][2] - a[1][2] * a[2][1]) / m3;
+        inv[0][1] = (a[0][2] * a[2][1] - a[0][1] * a[2][2]) / m3;
+        inv[0][2] = (a[0][1] * a[1][2] - a[0][2] * a[1][1]) / m3;
+        inv[1][0] = inv[0][1];
+        inv[1][1] = (a[0][0] * a[2][2] - a[0][2] * a[2][0]) / m3;
+        inv[1][2] = (a[0][2] * a[1][0] - a[0][0] * a[1][2]) / m3;
+        inv[2][0] = inv[0][2];
+        inv[2][1] = inv[1][2];
+        inv[2][2] = (a[0][0] * a[1][1] - a[0][1] * a[1][0]) / m3;
+        const double b[3] = {mQ[0][3], mQ[1][3], mQ[2][3]};
+        Vec3d center;
+        for (int i = 0; i < 3; ++i) {
+            center[i] = -(inv[i][0] * b[0] + inv[i][1] * b[1] + inv[i][2] * b[2]);
+        }
+        const double k = value(center);
+        if (!(k < 0.0)) {
+            mIsEmpty = true;
+            mBox = BBoxd(center, center);
+            return;
+        }
+        Vec3d half;
+        for (int i = 0; i < 3; ++i) half[i] = std::sqrt(-k * inv[i][i]);
+        mBox = BBoxd(center - half, center + half);
+    }
+}
+
+double Quadric::value(const Vec3d& p) const { return quadricValue(mQ, p[0], p[1], p[2]); }
+
+Vec3d Quadric::gradient(const Vec3d& p) const
+{
+    Vec3d g;
+    for (int i = 0; i < 3; ++i) {
+        g[i] = 2.0 * (mQ[i][0] * p[0] + mQ[i][1] * p[1] + mQ[i][2] * p[2] + mQ[i][3]);
+    }
+    return g;
+}
+
+void Quadric::values(const double* x, const double* y, const double* z, double* out,
+                     std::size_t n) const
+{
+    const Mat4 q = mQ;
+    for (std::size_t i = 0; i < n; ++i) out[i] = quadricValue(q, x[i], y[i], z[i]);
+}
+
+Interval Quadric::interval(const BBoxd& box) const
+{
+    const Vec3d m = box.getCenter();
+    const Vec3d h = (box.max() - box.min()) * 0.5;
+    const Vec3d g = gradient(m);
+    double lo = value(m), hi = lo;
+    for (int i = 0; i < 3; ++i) {
+        const double lin = std::abs(g[i]) * h[i];
+        const double sq = mQ[i][i] * h[i] * h[i];
+        lo += -lin + std::min(sq, 0.0);
+        hi += lin + std::max(sq, 0.0);
+        for (int j = i + 1; j < 3; ++j) {
+            const double cross = 2.0 * std::abs(mQ[i][j]) * h[i] * h[j];
+            lo -= cross;
+            hi += cross;
+        }
+    }
+    return {lo, hi};
+}
+
+BBoxd Quadric::boundingBox() const { return mBox; }
+
+std::array<Vec3d, 3> frameFromAxis(const Vec3d& axis)
+{
+    requireFinite(axis, "axis");
+    const double len = axis.length();
+    if (!(len > 0.0)) OPENVDB_THROW(openvdb::ValueError, "axis must be non-zero");
+    const Vec3d a = axis / len;
+    const double c = a[2]; // cos of the angle between +z and a
+    if (c > 1.0 - 1e-15) return {Vec3d(1, 0, 0), Vec3d(0, 1, 0), Vec3d(0, 0, 1)};
+    if (c < -1.0 + 1e-15) return {Vec3d(1, 0, 0), Vec3d(0, -1, 0), Vec3d(0, 0, -1)};
+    // Rodrigues: R = I + [v]x + [v]x^2 / (1 + c) with v = z x a.
+    const Vec3d v(-a[1], a[0], 0.0);
+    const double k = 1.0 / (1.0 + c);
+    const double r[3][3] = {
+        {1.0 - k * v[1] * v[1], k * v[0] * v[1], v[1]},
+        {k * v[0] * v[1], 1.0 - k * v[0] * v[0], -v[0]},
+        {-v[1], v[0], c}};
+    return {Vec3d(r[0][0], r[1][0], r[2][0]), Vec3d(r[0][1], r[1][1], r[2][1]),
+            Vec3d(r[0][2], r[1][2], r[2][2])};
+}
+
+Mat4 placeQuadric(const Mat4& local, const Vec3d& origin, const std::array<Vec3d, 3>& frame)
+{
+    // local q = R^T (p - o), i.e. [q 1] = M [p 1] with M = [[R^T, -R^T o], [0, 1]];
+    // Q_world = M^T Q_local M.
+    double m[4][4] = {};
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) m[i][j] = frame[i][j];
+        m[i][3] = -frame[i].dot(origin);
+    }
+    m[3][3] = 1.0;
+    double t[4][4] = {};
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) t[i][j] += local[i][k] * m[k][j];
+    Mat4 out{};
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) out[i][j] += m[k][i] * t[k][j];
+    // Remove rounding asymmetry.
+    for (int i = 0; i < 4; ++i)
+        for (int j = i + 1; j < 4; ++j) out[i][j] = out[j][i] = 0.5 * (out[i][j] + out[j][i]);
+    return out;
+}
+
+Implicit::Ptr makePlane(const Vec3d& normal, double offset)
+{
+    requireFinite(normal, "plane normal");
+    if (!std::isfinite(offset)) OPENVDB_THROW(openvdb::ValueError, "plane offset must be finite");
+    const double len = normal.length();
+    if (!(len > 0.0)) OPENVDB_THROW(openvdb::ValueError, "plane normal must be non-zero");
+    const Vec3d n = normal / len;
+    Mat4 q{};
+    for (int i = 0; i < 3; ++i) q[i][3] = q[3][i] = 0.5 * n[i];
+    q[3][3] = -offset / len;
+    return std::make_shared<Quadric>(q);
+}
+
+Implicit::Ptr makeCylinder(const Vec3d& center, const Vec3d& axis, double radius)
+{
+    requireFinite(center, "cylinder center");
+    requirePositive(radius, "cylinder radius");
+    return std::make_shared<Quadric>(
+        placeQuadric(diagonal(1.0, 1.0, 0.0, -radius * radius), center, frameFromAxis(axis)));
+}
+
+Implicit::Ptr makeEllipsoid(const Vec3d& center, const Vec3d& radii)
+{
+    requireFinite(center, "ellipsoid center");
+    for (int i = 0; i < 3; ++i) requirePositive(radii[i], "ellipsoid radii");
+    Mat4 q = diagonal(1.0 / (radii[0] * radii[0]), 1.0 / (radii[1] * radii[1]),
+                      1.0 / (radii[2] * radii[2]), -1.0);
+    return std::make_shared<Quadric>(placeQuadric(q, center, frameFromAxis(Vec3d(0, 0, 1))));
+}
+
+Implicit::Ptr makeCone(const Vec3d& apex, const Vec3d& axis, double halfAngleDeg)
+{
+    requireFinite(apex, "cone apex");
+    if (!(halfAngleDeg > 0.0 && halfAngleDeg < 90.0)) {
+        std::ostringstream os;
+        os << "cone half_angle_deg must be in (0, 90), got " << halfAngleDeg;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+    const double t = std::tan(halfAngleDeg * M_PI / 180.0);
+    return std::make_shared<Quadric>(
+        placeQuadric(diagonal(1.0, 1.0, -t * t, 0.0), apex, frameFromAxis(axis)));
+}
+
+Implicit::Ptr makeParaboloid(const Vec3d& vertex, const Vec3d& axis, bool hyperbolic, double a,
+                             double b)
+{
+    requireFinite(vertex, "paraboloid vertex");
+    requirePositive(a, "paraboloid a");
+    requirePositive(b, "paraboloid b");
+    Mat4 q = diagonal(1.0 / (a * a), (hyperbolic ? -1.0 : 1.0) / (b * b), 0.0, 0.0);
+    q[2][3] = q[3][2] = -0.5;
+    return std::make_shared<Quadric>(placeQuadric(q, vertex, frameFromAxis(axis)));
+}
+
+Implicit::Ptr makeHyperboloid(const Vec3d& center, const Vec3d& axis, bool twoSheets,
+                              const Vec3d& radii)
+{
+    requireFinite(center, "hyperboloid center");
+    for (int i = 0; i < 3; ++i) requirePositive(radii[i], "hyperboloid radii");
+    Mat4 q = diagonal(1.0 / (radii[0] * radii[0]), 1.0 / (radii[1] * radii[1]),
+                      -1.0 / (radii[2] * radii[2]), twoSheets ? 1.0 : -1.0);
+    return std::make_shared<Quadric>(placeQuadric(q, center, frameFromAxis(axis)));
+}
+
+} // namespace ivdb::implicit

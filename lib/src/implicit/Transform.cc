@@ -1,0 +1,137 @@
+#include <ivdb/implicit/Csg.h>
+
+#include <openvdb/Exceptions.h>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace ivdb::implicit {
+
+Transform::Transform(Ptr child, const Vec3d& translate, const Vec3d& rotateDeg,
+                     const Vec3d& scale)
+    : mChild(std::move(child)), mTranslate(translate), mScale(scale)
+{
+    if (!mChild) OPENVDB_THROW(openvdb::ValueError, "transform has no child");
+    for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(translate[i]) || !std::isfinite(rotateDeg[i])) {
+            OPENVDB_THROW(openvdb::ValueError, "transform translate and rotate_deg must be finite");
+        }
+        if (!(scale[i] > 0.0) || !std::isfinite(scale[i])) {
+            std::ostringstream os;
+            os << "transform scale must be > 0 and finite, got " << scale[i];
+            OPENVDB_THROW(openvdb::ValueError, os.str());
+        }
+    }
+    const double d2r = M_PI / 180.0;
+    const double cx = std::cos(rotateDeg[0] * d2r), sx = std::sin(rotateDeg[0] * d2r);
+    const double cy = std::cos(rotateDeg[1] * d2r), sy = std::sin(rotateDeg[1] * d2r);
+    const double cz = std::cos(rotateDeg[2] * d2r), sz = std::sin(rotateDeg[2] * d2r);
+    // R = Rz * Ry * Rx
+    const double r[3][3] = {
+        {cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx},
+        {sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx},
+        {-sy, cy * sx, cy * cx}};
+    std::copy(&r[0][0], &r[0][0] + 9, &mRot[0][0]);
+    mValueScale = std::min(scale[0], std::min(scale[1], scale[2]));
+}
+
+Transform::Transform(Ptr child, const Transform& like)
+    : mChild(std::move(child)), mTranslate(like.mTranslate), mScale(like.mScale),
+      mValueScale(like.mValueScale)
+{
+    std::copy(&like.mRot[0][0], &like.mRot[0][0] + 9, &mRot[0][0]);
+}
+
+Vec3d Transform::toLocal(const Vec3d& p) const
+{
+    const double dx = p[0] - mTranslate[0], dy = p[1] - mTranslate[1], dz = p[2] - mTranslate[2];
+    // q = S^-1 R^T (p - t)
+    return Vec3d((mRot[0][0] * dx + mRot[1][0] * dy + mRot[2][0] * dz) / mScale[0],
+                 (mRot[0][1] * dx + mRot[1][1] * dy + mRot[2][1] * dz) / mScale[1],
+                 (mRot[0][2] * dx + mRot[1][2] * dy + mRot[2][2] * dz) / mScale[2]);
+}
+
+Vec3d Transform::toWorld(const Vec3d& q) const
+{
+    const Vec3d s(q[0] * mScale[0], q[1] * mScale[1], q[2] * mScale[2]);
+    Vec3d p;
+    for (int i = 0; i < 3; ++i) {
+        p[i] = mRot[i][0] * s[0] + mRot[i][1] * s[1] + mRot[i][2] * s[2] + mTranslate[i];
+    }
+    return p;
+}
+
+double Transform::value(const Vec3d& p) const
+{
+    return mValueScale * mChild->value(toLocal(p));
+}
+
+Vec3d Transform::gradient(const Vec3d& p) const
+{
+    // d/dp [s child(S^-1 R^T (p - t))] = s R S^-1 grad child
+    const Vec3d g = mChild->gradient(toLocal(p));
+    const Vec3d h(g[0] / mScale[0], g[1] / mScale[1], g[2] / mScale[2]);
+    Vec3d out;
+    for (int i = 0; i < 3; ++i) {
+        out[i] = mValueScale * (mRot[i][0] * h[0] + mRot[i][1] * h[1] + mRot[i][2] * h[2]);
+    }
+    return out;
+}
+
+void Transform::values(const double* x, const double* y, const double* z, double* out,
+                       std::size_t n) const
+{
+    double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
+        qx[i] = q[0];
+        qy[i] = q[1];
+        qz[i] = q[2];
+    }
+    mChild->values(qx, qy, qz, out, n);
+    for (std::size_t i = 0; i < n; ++i) out[i] *= mValueScale;
+}
+
+namespace {
+template<typename MapT>
+BBoxd mapBox(const BBoxd& box, const MapT& map)
+{
+    BBoxd out(map(box.min()), map(box.min()));
+    for (int c = 1; c < 8; ++c) {
+        const Vec3d corner((c & 1) ? box.max()[0] : box.min()[0],
+                           (c & 2) ? box.max()[1] : box.min()[1],
+                           (c & 4) ? box.max()[2] : box.min()[2]);
+        out.expand(map(corner));
+    }
+    return out;
+}
+} // namespace
+
+Interval Transform::interval(const BBoxd& box) const
+{
+    const BBoxd local = mapBox(box, [this](const Vec3d& p) { return toLocal(p); });
+    return mChild->interval(local) * mValueScale;
+}
+
+BBoxd Transform::boundingBox() const
+{
+    const BBoxd c = mChild->boundingBox();
+    if (!isFinite(c)) return infiniteBox();
+    return mapBox(c, [this](const Vec3d& q) { return toWorld(q); });
+}
+
+bool Transform::isExactSdf() const
+{
+    return mChild->isExactSdf() && mScale[0] == mScale[1] && mScale[1] == mScale[2];
+}
+
+Implicit::Ptr Transform::prune(const BBoxd& box) const
+{
+    const BBoxd local = mapBox(box, [this](const Vec3d& p) { return toLocal(p); });
+    Ptr c = mChild->prune(local);
+    if (c == mChild) return shared_from_this();
+    return Ptr(new Transform(std::move(c), *this));
+}
+
+} // namespace ivdb::implicit

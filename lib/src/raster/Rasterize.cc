@@ -1,0 +1,610 @@
+#include <ivdb/raster/Rasterize.h>
+
+#include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/Primitives.h>
+#include <ivdb/util/System.h>
+
+#include <openvdb/tools/ChangeBackground.h>
+#include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Morphology.h>
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tools/SignedFloodFill.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <atomic>
+#include <cmath>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <vector>
+
+namespace ivdb::raster {
+
+namespace {
+
+using implicit::BBoxd;
+using implicit::Implicit;
+using implicit::Interval;
+using implicit::Vec3d;
+using openvdb::Coord;
+using openvdb::CoordBBox;
+using FloatTree = openvdb::FloatTree;
+using LeafT = FloatTree::LeafNodeType;
+using Int2T = FloatTree::RootNodeType::ChildNodeType;
+using Int1T = Int2T::ChildNodeType;
+
+enum class Verdict { Outside, Inside, Straddle };
+
+/// Everything the two sampling paths share: the band rule, the per-voxel values and the
+/// final re-distancing, so sparse and dense give the same grid.
+struct Context
+{
+    Implicit::Ptr shape;
+    double dx = 0.0;
+    double band = 0.0;      // half width in world units, also the background
+    double halfWidthVox = 0.0;
+    bool exact = false;     // the shape's value is the exact signed distance
+    int sweepSteps = 0;     // non-exact: voxels kept around the interface for re-distancing
+    double reach = 0.0;     // world distance a box is dilated by before the interval test
+    CoordBBox region;       // index box that holds every voxel of the result
+    openvdb::util::NullInterrupter* interrupter = nullptr;
+
+    BBoxd worldBox(const CoordBBox& b) const
+    {
+        return BBoxd(Vec3d(b.min().x(), b.min().y(), b.min().z()) * dx,
+                     Vec3d(b.max().x(), b.max().y(), b.max().z()) * dx);
+    }
+
+    BBoxd dilatedWorldBox(const CoordBBox& b) const
+    {
+        BBoxd w = worldBox(b);
+        return BBoxd(w.min() - Vec3d(reach), w.max() + Vec3d(reach));
+    }
+
+    /// Can the box hold a voxel of the result? Exact: a band voxel has |f| < band; otherwise
+    /// the result near a voxel depends on f within `reach` of it, so a sign change there.
+    Verdict classify(const Implicit& f, const CoordBBox& b) const
+    {
+        if (exact) {
+            const Interval iv = f.interval(worldBox(b));
+            const double eps = 1e-6 * dx;
+            if (iv.lo >= band + eps) return Verdict::Outside;
+            if (iv.hi <= -(band + eps)) return Verdict::Inside;
+            return Verdict::Straddle;
+        }
+        const Interval iv = f.interval(dilatedWorldBox(b));
+        const double eps = 1e-12 * (std::abs(iv.lo) + std::abs(iv.hi));
+        if (iv.lo > eps) return Verdict::Outside;
+        if (iv.hi < -eps) return Verdict::Inside;
+        return Verdict::Straddle;
+    }
+
+    /// The value stored before re-distancing: f itself for an exact SDF, else f / |grad f|,
+    /// clamped so that far values stay finite.
+    float estimate(const Implicit& f, double value, const Vec3d& p) const
+    {
+        if (exact) return static_cast<float>(value);
+        if (value == 0.0) return 0.0f;
+        const double g = f.gradient(p).length();
+        const double limit = 4.0 * reach;
+        double e = (g > 0.0 && std::isfinite(g)) ? value / g : (value > 0.0 ? limit : -limit);
+        e = std::max(-limit, std::min(limit, e));
+        return static_cast<float>(e);
+    }
+
+    /// Band rule for exact shapes, on the stored float value.
+    bool inBand(float v) const { return std::abs(double(v)) < band; }
+
+    bool interrupted(int percent = -1) const
+    {
+        return interrupter && interrupter->wasInterrupted(percent);
+    }
+};
+
+[[noreturn]] void throwInterrupted()
+{
+    OPENVDB_THROW(openvdb::RuntimeError, "interrupted");
+}
+
+/// World coordinates of the 512 voxels of the leaf at @a origin, in leaf offset order.
+void leafPoints(const Coord& origin, double dx, double* x, double* y, double* z)
+{
+    for (int i = 0, n = 0; i < 8; ++i) {
+        for (int j = 0; j < 8; ++j) {
+            for (int k = 0; k < 8; ++k, ++n) {
+                x[n] = double(origin.x() + i) * dx;
+                y[n] = double(origin.y() + j) * dx;
+                z[n] = double(origin.z() + k) * dx;
+            }
+        }
+    }
+}
+
+/// Build the leaf at @a origin from the shape's values, or return null with @a inside telling
+/// whether the leaf would hold only inside voxels (exact) / only one sign (never for non-exact).
+LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, bool& inside)
+{
+    alignas(64) double x[512], y[512], z[512], v[512];
+    leafPoints(origin, ctx.dx, x, y, z);
+    f.values(x, y, z, v, 512);
+    const float bg = static_cast<float>(ctx.band);
+    auto leaf = std::make_unique<LeafT>(origin, bg);
+    float* buf = leaf->buffer().data();
+    auto& mask = leaf->getValueMask();
+    if (ctx.exact) {
+        bool anyActive = false, anyOutside = false;
+        for (int n = 0; n < 512; ++n) {
+            const float fv = static_cast<float>(v[n]);
+            if (ctx.inBand(fv)) {
+                buf[n] = fv;
+                mask.setOn(n);
+                anyActive = true;
+            } else {
+                buf[n] = fv > 0.0f ? bg : -bg;
+                anyOutside = anyOutside || fv > 0.0f;
+            }
+        }
+        if (!anyActive) {
+            inside = !anyOutside;
+            return nullptr;
+        }
+    } else {
+        // Every voxel of a candidate leaf takes part in re-distancing (see finishBand).
+        for (int n = 0; n < 512; ++n) {
+            buf[n] = ctx.estimate(f, v[n], Vec3d(x[n], y[n], z[n]));
+        }
+        mask.setOn();
+    }
+    return leaf.release();
+}
+
+struct Level1Result
+{
+    Coord origin;
+    Int1T* node = nullptr;  // owned until added to the tree
+    bool inside = false;    // the whole level-1 box is an inside tile
+};
+
+/// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels).
+openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
+{
+    const float bg = static_cast<float>(ctx.band);
+    auto grid = openvdb::FloatGrid::create(bg);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
+    FloatTree& tree = grid->tree();
+    const Implicit& shape = *ctx.shape;
+
+    auto alignDown = [](int v, int dim) { return v & ~(dim - 1); };
+
+    // Level 2 (4096^3): few nodes, serial.
+    struct Task { Coord origin; Implicit::Ptr node; };
+    std::vector<Task> tasks;
+    std::vector<Coord> insideLevel2;
+    const CoordBBox& reg = ctx.region;
+    const int d2 = Int2T::DIM, d1 = Int1T::DIM;
+    for (int i = alignDown(reg.min().x(), d2); i <= reg.max().x(); i += d2) {
+        for (int j = alignDown(reg.min().y(), d2); j <= reg.max().y(); j += d2) {
+            for (int k = alignDown(reg.min().z(), d2); k <= reg.max().z(); k += d2) {
+                const CoordBBox box2 = CoordBBox::createCube(Coord(i, j, k), d2);
+                const Verdict v = ctx.classify(shape, box2);
+                if (v == Verdict::Outside) continue;
+                if (v == Verdict::Inside) {
+                    insideLevel2.push_back(box2.min());
+                    continue;
+                }
+                const Implicit::Ptr node2 = shape.prune(ctx.dilatedWorldBox(box2));
+                // Level-1 children of this node that overlap the region.
+                CoordBBox sub = box2;
+                sub.intersect(reg);
+                for (int a = alignDown(sub.min().x(), d1); a <= sub.max().x(); a += d1)
+                    for (int b = alignDown(sub.min().y(), d1); b <= sub.max().y(); b += d1)
+                        for (int c = alignDown(sub.min().z(), d1); c <= sub.max().z(); c += d1)
+                            tasks.push_back({Coord(a, b, c), node2});
+            }
+        }
+    }
+    if (ctx.interrupted(0)) throwInterrupted();
+
+    // Level 1 (128^3) in parallel: each task builds a whole internal node of leaves.
+    std::vector<Level1Result> results(tasks.size());
+    std::atomic<size_t> done{0};
+    std::atomic<bool> cancelled{false};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, tasks.size(), 1),
+        [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t t = r.begin(); t != r.end(); ++t) {
+            if (cancelled) return;
+            const Task& task = tasks[t];
+            Level1Result& res = results[t];
+            res.origin = task.origin;
+            const CoordBBox box1 = CoordBBox::createCube(task.origin, d1);
+            const Verdict v1 = ctx.classify(*task.node, box1);
+            if (v1 == Verdict::Inside) res.inside = true;
+            if (v1 != Verdict::Straddle) continue;
+            const Implicit::Ptr node1 = task.node->prune(ctx.dilatedWorldBox(box1));
+            auto int1 = std::make_unique<Int1T>(task.origin, bg);
+            bool any = false;
+            CoordBBox sub = box1;
+            sub.intersect(ctx.region);
+            const int d0 = LeafT::DIM;
+            for (int a = alignDown(sub.min().x(), d0); a <= sub.max().x(); a += d0) {
+                for (int b = alignDown(sub.min().y(), d0); b <= sub.max().y(); b += d0) {
+                    for (int c = alignDown(sub.min().z(), d0); c <= sub.max().z(); c += d0) {
+                        const Coord o(a, b, c);
+                        const CoordBBox box0 = CoordBBox::createCube(o, d0);
+                        const Verdict v0 = ctx.classify(*node1, box0);
+                        bool inside = v0 == Verdict::Inside;
+                        if (v0 == Verdict::Straddle) {
+                            const Implicit::Ptr node0 = node1->prune(ctx.dilatedWorldBox(box0));
+                            if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside)) {
+                                int1->addLeaf(leaf);
+                                any = true;
+                                continue;
+                            }
+                        }
+                        if (inside) {
+                            int1->addTile(int1->coordToOffset(o), -bg, false);
+                            any = true;
+                        }
+                    }
+                }
+            }
+            if (any) res.node = int1.release();
+            const size_t n = ++done;
+            if (ctx.interrupter && ctx.interrupted(int(100 * n / tasks.size()))) cancelled = true;
+        }
+    });
+    if (cancelled) {
+        for (auto& r : results) delete r.node;
+        throwInterrupted();
+    }
+
+    // Assemble: level-1 nodes into their level-2 parents, those into the root.
+    std::map<Coord, std::unique_ptr<Int2T>> level2;
+    for (auto& r : results) {
+        if (!r.node && !r.inside) continue;
+        const Coord o2(alignDown(r.origin.x(), d2), alignDown(r.origin.y(), d2),
+                       alignDown(r.origin.z(), d2));
+        auto& parent = level2[o2];
+        if (!parent) parent = std::make_unique<Int2T>(o2, bg);
+        if (r.node) {
+            parent->addChild(r.node);
+        } else {
+            parent->addTile(parent->coordToOffset(r.origin), -bg, false);
+        }
+    }
+    for (auto& [o2, node] : level2) tree.root().addChild(node.release());
+    for (const Coord& o2 : insideLevel2) tree.root().addTile(o2, -bg, false);
+    return grid;
+}
+
+/// Dense path: sample every voxel of the region into an array, then build the same grid.
+openvdb::FloatGrid::Ptr sampleDense(const Context& ctx, std::uint64_t memoryLimit)
+{
+    const float bg = static_cast<float>(ctx.band);
+    const CoordBBox& reg = ctx.region;
+    const Coord dim = reg.dim();
+    const std::uint64_t nx = dim.x(), ny = dim.y(), nz = dim.z();
+    const std::uint64_t count = nx * ny * nz;
+    std::vector<float> samples;
+    samples.resize(count); // the caller checked the estimate against memory
+
+    const Implicit& shape = *ctx.shape;
+    std::atomic<bool> cancelled{false};
+    std::atomic<std::uint64_t> rows{0};
+    tbb::parallel_for(tbb::blocked_range<std::uint64_t>(0, nx * ny, 16),
+        [&](const tbb::blocked_range<std::uint64_t>& r) {
+        if (cancelled) return;
+        alignas(64) double x[implicit::kMaxBatch], y[implicit::kMaxBatch],
+            z[implicit::kMaxBatch], v[implicit::kMaxBatch];
+        for (std::uint64_t row = r.begin(); row != r.end(); ++row) {
+            const int i = reg.min().x() + int(row / ny), j = reg.min().y() + int(row % ny);
+            float* out = samples.data() + row * nz;
+            for (std::uint64_t k0 = 0; k0 < nz; k0 += implicit::kMaxBatch) {
+                const std::size_t n = std::size_t(std::min<std::uint64_t>(implicit::kMaxBatch, nz - k0));
+                for (std::size_t m = 0; m < n; ++m) {
+                    x[m] = double(i) * ctx.dx;
+                    y[m] = double(j) * ctx.dx;
+                    z[m] = double(reg.min().z() + int(k0 + m)) * ctx.dx;
+                }
+                shape.values(x, y, z, v, n);
+                for (std::size_t m = 0; m < n; ++m) out[k0 + m] = static_cast<float>(v[m]);
+            }
+        }
+        const std::uint64_t done = rows += r.size();
+        if (ctx.interrupter && ctx.interrupted(int(90 * done / (nx * ny)))) cancelled = true;
+    });
+    if (cancelled) throwInterrupted();
+    (void)memoryLimit;
+
+    auto at = [&](int i, int j, int k) -> float {
+        return samples[(std::uint64_t(i - reg.min().x()) * ny + std::uint64_t(j - reg.min().y())) * nz +
+                       std::uint64_t(k - reg.min().z())];
+    };
+    auto inRegion = [&](int i, int j, int k) { return reg.isInside(Coord(i, j, k)); };
+
+    // Leaf-sized blocks that the result needs.
+    const int d0 = LeafT::DIM;
+    const Coord bmin(reg.min().x() & ~(d0 - 1), reg.min().y() & ~(d0 - 1), reg.min().z() & ~(d0 - 1));
+    const Coord bcount((reg.max().x() - bmin.x()) / d0 + 1, (reg.max().y() - bmin.y()) / d0 + 1,
+                       (reg.max().z() - bmin.z()) / d0 + 1);
+    const std::size_t nblocks = std::size_t(bcount.x()) * bcount.y() * bcount.z();
+    std::vector<std::uint8_t> needed(nblocks, 0);
+    auto blockIndex = [&](int bi, int bj, int bk) {
+        return (std::size_t(bi) * bcount.y() + bj) * bcount.z() + bk;
+    };
+    tbb::parallel_for(tbb::blocked_range<int>(0, bcount.x()), [&](const tbb::blocked_range<int>& r) {
+        for (int bi = r.begin(); bi != r.end(); ++bi)
+        for (int bj = 0; bj < bcount.y(); ++bj)
+        for (int bk = 0; bk < bcount.z(); ++bk) {
+            bool need = false;
+            for (int i = 0; i < d0 && !need; ++i)
+            for (int j = 0; j < d0 && !need; ++j)
+            for (int k = 0; k < d0 && !need; ++k) {
+                const int x = bmin.x() + bi * d0 + i, y = bmin.y() + bj * d0 + j,
+                          z = bmin.z() + bk * d0 + k;
+                if (!inRegion(x, y, z)) continue;
+                const float v = at(x, y, z);
+                if (ctx.exact) {
+                    need = ctx.inBand(v);
+                } else {
+                    // A sign change to a face neighbour marks an interface voxel.
+                    const bool s = v > 0.0f;
+                    need = (inRegion(x + 1, y, z) && (at(x + 1, y, z) > 0.0f) != s) ||
+                           (inRegion(x - 1, y, z) && (at(x - 1, y, z) > 0.0f) != s) ||
+                           (inRegion(x, y + 1, z) && (at(x, y + 1, z) > 0.0f) != s) ||
+                           (inRegion(x, y - 1, z) && (at(x, y - 1, z) > 0.0f) != s) ||
+                           (inRegion(x, y, z + 1) && (at(x, y, z + 1) > 0.0f) != s) ||
+                           (inRegion(x, y, z - 1) && (at(x, y, z - 1) > 0.0f) != s);
+                }
+            }
+            needed[blockIndex(bi, bj, bk)] = need ? 1 : 0;
+        }
+    });
+    if (!ctx.exact) {
+        // Re-distancing needs every voxel within sweepSteps (+1 for its stencil) of the interface.
+        const int nb = (ctx.sweepSteps + 1 + d0 - 1) / d0;
+        std::vector<std::uint8_t> grown(nblocks, 0);
+        for (int bi = 0; bi < bcount.x(); ++bi)
+        for (int bj = 0; bj < bcount.y(); ++bj)
+        for (int bk = 0; bk < bcount.z(); ++bk) {
+            if (!needed[blockIndex(bi, bj, bk)]) continue;
+            for (int a = std::max(0, bi - nb); a <= std::min(bcount.x() - 1, bi + nb); ++a)
+            for (int b = std::max(0, bj - nb); b <= std::min(bcount.y() - 1, bj + nb); ++b)
+            for (int c = std::max(0, bk - nb); c <= std::min(bcount.z() - 1, bk + nb); ++c)
+                grown[blockIndex(a, b, c)] = 1;
+        }
+        needed.swap(grown);
+    }
+
+    std::vector<LeafT*> leaves(nblocks, nullptr);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nblocks), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+            if (!needed[b]) continue;
+            const int bi = int(b / (std::size_t(bcount.y()) * bcount.z()));
+            const int bj = int((b / bcount.z()) % bcount.y());
+            const int bk = int(b % bcount.z());
+            const Coord o(bmin.x() + bi * d0, bmin.y() + bj * d0, bmin.z() + bk * d0);
+            auto leaf = new LeafT(o, bg);
+            float* buf = leaf->buffer().data();
+            for (int i = 0, n = 0; i < d0; ++i)
+            for (int j = 0; j < d0; ++j)
+            for (int k = 0; k < d0; ++k, ++n) {
+                const int x = o.x() + i, y = o.y() + j, z = o.z() + k;
+                const Vec3d p(double(x) * ctx.dx, double(y) * ctx.dx, double(z) * ctx.dx);
+                if (ctx.exact) {
+                    const float v = inRegion(x, y, z) ? at(x, y, z) : static_cast<float>(shape.value(p));
+                    if (ctx.inBand(v)) {
+                        buf[n] = v;
+                        leaf->setValueOn(n);
+                    } else {
+                        buf[n] = v > 0.0f ? bg : -bg;
+                    }
+                } else {
+                    buf[n] = ctx.estimate(shape, shape.value(p), p);
+                    leaf->setValueOn(n);
+                }
+            }
+            leaves[b] = leaf;
+        }
+    });
+    samples.clear();
+    samples.shrink_to_fit();
+
+    auto grid = openvdb::FloatGrid::create(bg);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
+    openvdb::tree::ValueAccessor<FloatTree> acc(grid->tree());
+    for (LeafT* leaf : leaves) {
+        if (leaf) acc.addLeaf(leaf);
+    }
+    // Inside tiles: the dense path has no intervals, so the sign spreads from the band.
+    openvdb::tools::signedFloodFill(grid->tree());
+    return grid;
+}
+
+/// Non-exact shapes: keep the voxels within sweepSteps of the interface, re-distance them by
+/// fast sweeping (OpenVDB's sdfToSdf) and trim to the band. Only voxel signs and the estimates
+/// next to the interface matter, which both sampling paths compute identically.
+openvdb::FloatGrid::Ptr finishBand(const Context& ctx, openvdb::FloatGrid& samples)
+{
+    using MaskTree = openvdb::MaskTree;
+    FloatTree& tree = samples.tree();
+    MaskTree interface(tree, false, openvdb::TopologyCopy());
+    {
+        openvdb::tree::LeafManager<MaskTree> masks(interface);
+        masks.foreach([&](MaskTree::LeafNodeType& mleaf, size_t) {
+            openvdb::tree::ValueAccessor<const FloatTree> acc(tree);
+            const LeafT* leaf = acc.probeConstLeaf(mleaf.origin());
+            mleaf.setValuesOff();
+            if (!leaf) return;
+            for (auto it = leaf->cbeginValueOn(); it; ++it) {
+                const Coord ijk = it.getCoord();
+                const bool s = *it > 0.0f;
+                static const Coord kFaces[6] = {Coord(1, 0, 0), Coord(-1, 0, 0), Coord(0, 1, 0),
+                                                Coord(0, -1, 0), Coord(0, 0, 1), Coord(0, 0, -1)};
+                for (const Coord& d : kFaces) {
+                    if ((acc.getValue(ijk + d) > 0.0f) != s) {
+                        mleaf.setValueOn(it.pos());
+                        break;
+                    }
+                }
+            }
+        });
+    }
+    if (ctx.interrupted()) throwInterrupted();
+    openvdb::tools::dilateActiveValues(interface, ctx.sweepSteps,
+                                       openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
+    tree.topologyIntersection(interface);
+    if (tree.activeVoxelCount() == 0) return samples.copy(); // no surface: an empty band
+
+    auto out = openvdb::tools::sdfToSdf(samples, 0.0f, 1);
+    if (ctx.interrupted()) throwInterrupted();
+
+    const float bg = static_cast<float>(ctx.band);
+    openvdb::tree::LeafManager<FloatTree> leaves(out->tree());
+    leaves.foreach([&](LeafT& leaf, size_t) {
+        float* buf = leaf.buffer().data();
+        for (int n = 0; n < 512; ++n) {
+            const float v = buf[n];
+            if (leaf.isValueOn(n) && ctx.inBand(v)) continue;
+            leaf.setValueOff(n, v > 0.0f ? bg : -bg);
+        }
+    });
+    openvdb::tools::changeLevelSetBackground(out->tree(), bg);
+    return out;
+}
+
+} // namespace
+
+Implicit::Ptr clipToBounds(const Implicit::Ptr& shape, const RasterSettings& settings)
+{
+    if (!settings.bounds) return shape;
+    const BBoxd& b = *settings.bounds;
+    if (shape->isBounded()) {
+        // A shape well inside the bounds is unchanged within its band: keep it (and its
+        // exactness) as it is.
+        const double margin = (settings.halfWidth + 2.0) * settings.voxelSize;
+        const BBoxd s = shape->boundingBox();
+        bool inside = true;
+        for (int i = 0; i < 3; ++i) {
+            inside = inside && s.min()[i] - margin > b.min()[i] && s.max()[i] + margin < b.max()[i];
+        }
+        if (inside) return shape;
+    }
+    auto box = std::make_shared<implicit::Box>(b.getCenter(), b.max() - b.min());
+    return std::make_shared<implicit::Csg>(implicit::Csg::Op::Intersection,
+                                           std::vector<Implicit::Ptr>{shape, box});
+}
+
+namespace {
+
+Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
+{
+    if (!shape) OPENVDB_THROW(openvdb::ValueError, "no shape to rasterize");
+    if (!(s.voxelSize > 0.0) || !std::isfinite(s.voxelSize)) {
+        std::ostringstream os;
+        os << "voxel size must be > 0 and finite, got " << s.voxelSize;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+    if (!(s.halfWidth >= 1.0) || !std::isfinite(s.halfWidth)) {
+        std::ostringstream os;
+        os << "half width must be >= 1 voxel and finite, got " << s.halfWidth;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+    Context ctx;
+    ctx.shape = clipToBounds(shape, s);
+    if (!ctx.shape->isBounded()) {
+        OPENVDB_THROW(openvdb::ValueError,
+            "the shape is unbounded (a plane, cylinder, cone, paraboloid, hyperboloid or an "
+            "unbounded quadric or CSG result): add \"bounds\" {\"min\": [...], \"max\": [...]} "
+            "to the scene to clip it to a box");
+    }
+    ctx.dx = s.voxelSize;
+    ctx.halfWidthVox = s.halfWidth;
+    ctx.band = s.halfWidth * s.voxelSize;
+    ctx.exact = ctx.shape->isExactSdf();
+    ctx.interrupter = s.interrupter;
+    if (ctx.exact) {
+        ctx.reach = ctx.band;
+    } else {
+        // A voxel at distance < band from the surface is within Chebyshev distance
+        // ceil(halfWidth) + 1 of a voxel next to a sign change; the samples must reach one
+        // more voxel for the interface test, and diagonals stretch a Chebyshev step by sqrt(3).
+        ctx.sweepSteps = int(std::ceil(s.halfWidth)) + 1;
+        ctx.reach = (ctx.sweepSteps * std::sqrt(3.0) + 2.0) * ctx.dx;
+    }
+    const BBoxd b = ctx.shape->boundingBox();
+    const double maxIndex = double(1 << 30);
+    Coord lo, hi;
+    for (int i = 0; i < 3; ++i) {
+        const double l = std::floor((b.min()[i] - ctx.reach) / ctx.dx) - 1.0;
+        const double h = std::ceil((b.max()[i] + ctx.reach) / ctx.dx) + 1.0;
+        if (!(std::abs(l) < maxIndex && std::abs(h) < maxIndex)) {
+            std::ostringstream os;
+            os << "the shape spans too many voxels (" << (h - l) << " along " << "xyz"[i]
+               << "): use a larger voxel size or smaller bounds";
+            OPENVDB_THROW(openvdb::ValueError, os.str());
+        }
+        lo[i] = int(l);
+        hi[i] = int(h);
+    }
+    ctx.region = CoordBBox(lo, hi);
+    return ctx;
+}
+
+} // namespace
+
+std::uint64_t denseMemoryEstimate(const Implicit::Ptr& shape, const RasterSettings& settings)
+{
+    const Context ctx = makeContext(shape, settings);
+    const Coord d = ctx.region.dim();
+    return std::uint64_t(d.x()) * std::uint64_t(d.y()) * std::uint64_t(d.z()) * sizeof(float);
+}
+
+openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettings& settings)
+{
+    const Context ctx = makeContext(shape, settings);
+
+    if (settings.sampling == Sampling::Dense) {
+        const Coord d = ctx.region.dim();
+        const std::uint64_t need = std::uint64_t(d.x()) * d.y() * d.z() * sizeof(float);
+        const std::uint64_t limit = settings.denseMemoryLimit
+                                        ? settings.denseMemoryLimit
+                                        : std::uint64_t(0.8 * double(util::availableMemory()));
+        if (need > limit) {
+            std::ostringstream os;
+            os << "dense sampling of " << d.x() << " x " << d.y() << " x " << d.z()
+               << " voxels needs about " << util::formatBytes(double(need)) << " but only "
+               << util::formatBytes(double(limit))
+               << " may be used: use --sampling sparse, a larger voxel size or smaller bounds";
+            OPENVDB_THROW(openvdb::RuntimeError, os.str());
+        }
+    }
+
+    auto run = [&]() {
+        if (ctx.interrupter) ctx.interrupter->start("Rasterizing");
+        openvdb::FloatGrid::Ptr grid = settings.sampling == Sampling::Dense
+                                           ? sampleDense(ctx, settings.denseMemoryLimit)
+                                           : sampleSparse(ctx);
+        if (!ctx.exact) grid = finishBand(ctx, *grid);
+        openvdb::tools::pruneLevelSet(grid->tree());
+        if (ctx.interrupter) ctx.interrupter->end();
+        return grid;
+    };
+    openvdb::FloatGrid::Ptr grid;
+    if (settings.threaded) {
+        grid = run();
+    } else {
+        tbb::task_arena serial(1);
+        grid = serial.execute(run);
+    }
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    grid->setName("surface");
+    return grid;
+}
+
+} // namespace ivdb::raster

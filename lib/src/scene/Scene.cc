@@ -1,0 +1,366 @@
+#include <ivdb/scene/Scene.h>
+
+#include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/Primitives.h>
+#include <ivdb/implicit/Quadric.h>
+
+#include <openvdb/Exceptions.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <set>
+#include <sstream>
+#include <vector>
+
+namespace ivdb::scene {
+
+namespace {
+
+using nlohmann::json;
+using implicit::Implicit;
+using implicit::Vec3d;
+
+std::string brief(const json& v)
+{
+    std::string s = v.dump();
+    if (s.size() > 60) s = s.substr(0, 57) + "...";
+    return s;
+}
+
+/// Reads one JSON object, remembering which keys were used so unknown keys are refused.
+class ObjectReader
+{
+public:
+    ObjectReader(const json& j, std::string path, const std::string& origin)
+        : mJson(j), mPath(std::move(path)), mOrigin(origin)
+    {
+        if (!j.is_object()) fail(mPath, "must be an object, got " + brief(j));
+    }
+
+    [[noreturn]] void fail(const std::string& path, const std::string& what) const
+    {
+        throw SceneError(mOrigin + ": " + (path.empty() ? std::string("(top level)") : path) +
+                         ": " + what);
+    }
+
+    std::string childPath(const std::string& key) const
+    {
+        return mPath.empty() ? key : mPath + "." + key;
+    }
+
+    bool has(const std::string& key) const { return mJson.contains(key); }
+
+    const json& raw(const std::string& key)
+    {
+        mUsed.insert(key);
+        if (!mJson.contains(key)) fail(childPath(key), "is missing");
+        return mJson.at(key);
+    }
+
+    double number(const std::string& key, std::optional<double> def = std::nullopt)
+    {
+        if (!has(key)) {
+            if (def) return *def;
+            fail(childPath(key), "is missing (a number)");
+        }
+        return toNumber(raw(key), childPath(key));
+    }
+
+    double positive(const std::string& key, std::optional<double> def = std::nullopt)
+    {
+        const double v = number(key, def);
+        if (!(v > 0.0)) fail(childPath(key), "must be > 0, got " + brief(json(v)));
+        return v;
+    }
+
+    Vec3d vec3(const std::string& key, std::optional<Vec3d> def = std::nullopt)
+    {
+        if (!has(key)) {
+            if (def) return *def;
+            fail(childPath(key), "is missing (an array of 3 numbers)");
+        }
+        return toVec3(raw(key), childPath(key));
+    }
+
+    Vec3d positiveVec3(const std::string& key, std::optional<Vec3d> def = std::nullopt)
+    {
+        const Vec3d v = vec3(key, def);
+        for (int i = 0; i < 3; ++i) {
+            if (!(v[i] > 0.0)) {
+                fail(childPath(key) + "[" + std::to_string(i) + "]",
+                     "must be > 0, got " + brief(json(v[i])));
+            }
+        }
+        return v;
+    }
+
+    std::string string(const std::string& key, const std::vector<std::string>& allowed,
+                       std::optional<std::string> def = std::nullopt)
+    {
+        if (!has(key)) {
+            if (def) return *def;
+            fail(childPath(key), "is missing (one of " + join(allowed) + ")");
+        }
+        const json& v = raw(key);
+        if (!v.is_string() ||
+            std::find(allowed.begin(), allowed.end(), v.get<std::string>()) == allowed.end()) {
+            fail(childPath(key), "must be one of " + join(allowed) + ", got " + brief(v));
+        }
+        return v.get<std::string>();
+    }
+
+    /// Refuse keys that no reader asked for.
+    void finish(const std::vector<std::string>& known) const
+    {
+        for (auto it = mJson.begin(); it != mJson.end(); ++it) {
+            if (!mUsed.count(it.key())) {
+                fail(childPath(it.key()), "unknown key; allowed here: " + join(known));
+            }
+        }
+    }
+
+    double toNumber(const json& v, const std::string& path) const
+    {
+        if (!v.is_number()) fail(path, "must be a number, got " + brief(v));
+        const double d = v.get<double>();
+        if (!std::isfinite(d)) fail(path, "must be finite, got " + brief(v));
+        return d;
+    }
+
+    Vec3d toVec3(const json& v, const std::string& path) const
+    {
+        if (!v.is_array() || v.size() != 3) {
+            fail(path, "must be an array of 3 numbers, got " + brief(v));
+        }
+        return Vec3d(toNumber(v[0], path + "[0]"), toNumber(v[1], path + "[1]"),
+                     toNumber(v[2], path + "[2]"));
+    }
+
+    const std::string& path() const { return mPath; }
+    const std::string& origin() const { return mOrigin; }
+
+    static std::string join(const std::vector<std::string>& words)
+    {
+        std::string s;
+        for (const auto& w : words) s += (s.empty() ? "" : ", ") + w;
+        return s;
+    }
+
+private:
+    const json& mJson;
+    std::string mPath;
+    const std::string& mOrigin;
+    std::set<std::string> mUsed;
+};
+
+Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin);
+
+std::vector<Implicit::Ptr> parseChildren(ObjectReader& r, std::size_t minCount)
+{
+    const json& c = r.raw("children");
+    const std::string cpath = r.childPath("children");
+    if (!c.is_array()) r.fail(cpath, "must be an array of shapes, got " + brief(c));
+    if (c.size() < minCount) {
+        r.fail(cpath, "needs at least " + std::to_string(minCount) + " shapes, got " +
+                          std::to_string(c.size()));
+    }
+    std::vector<Implicit::Ptr> out;
+    for (std::size_t i = 0; i < c.size(); ++i) {
+        out.push_back(parseNode(c[i], cpath + "[" + std::to_string(i) + "]", r.origin()));
+    }
+    return out;
+}
+
+implicit::Mat4 parseMatrix(ObjectReader& r)
+{
+    const json& m = r.raw("matrix");
+    const std::string mpath = r.childPath("matrix");
+    if (!m.is_array() || m.size() != 4) {
+        r.fail(mpath, "must be a 4x4 array of numbers (4 rows of 4), got " + brief(m));
+    }
+    implicit::Mat4 q{};
+    for (std::size_t i = 0; i < 4; ++i) {
+        const std::string rpath = mpath + "[" + std::to_string(i) + "]";
+        if (!m[i].is_array() || m[i].size() != 4) {
+            r.fail(rpath, "must be a row of 4 numbers, got " + brief(m[i]));
+        }
+        for (std::size_t k = 0; k < 4; ++k) {
+            q[i][k] = r.toNumber(m[i][k], rpath + "[" + std::to_string(k) + "]");
+        }
+    }
+    double scale = 0.0;
+    for (auto& row : q) for (double v : row) scale = std::max(scale, std::abs(v));
+    if (scale == 0.0) r.fail(mpath, "is all zero, which has no surface");
+    for (int i = 0; i < 4; ++i) {
+        for (int k = i + 1; k < 4; ++k) {
+            if (std::abs(q[i][k] - q[k][i]) > 1e-12 * scale) {
+                std::ostringstream os;
+                os << "must be symmetric: [" << i << "][" << k << "] is " << q[i][k] << " but ["
+                   << k << "][" << i << "] is " << q[k][i];
+                r.fail(mpath, os.str());
+            }
+        }
+    }
+    return q;
+}
+
+Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin)
+{
+    ObjectReader r(j, path, origin);
+    static const std::vector<std::string> kTypes = {
+        "sphere", "box", "torus", "quadric", "plane", "cylinder", "ellipsoid", "cone",
+        "paraboloid", "hyperboloid", "union", "intersection", "difference", "transform"};
+    const std::string type = r.string("type", kTypes);
+    const Vec3d zero(0.0), zAxis(0.0, 0.0, 1.0);
+
+    // Library constructors validate too; their messages get this node's path.
+    try {
+        Implicit::Ptr node;
+        std::vector<std::string> keys = {"type"};
+        auto use = [&keys](std::initializer_list<const char*> k) {
+            keys.insert(keys.end(), k.begin(), k.end());
+        };
+        if (type == "sphere") {
+            use({"center", "radius"});
+            node = std::make_shared<implicit::Sphere>(r.vec3("center", zero), r.positive("radius"));
+        } else if (type == "box") {
+            use({"center", "size"});
+            node = std::make_shared<implicit::Box>(r.vec3("center", zero), r.positiveVec3("size"));
+        } else if (type == "torus") {
+            use({"center", "major_radius", "minor_radius"});
+            const Vec3d c = r.vec3("center", zero);
+            const double major = r.positive("major_radius"), minor = r.positive("minor_radius");
+            if (!(minor < major)) {
+                r.fail(r.childPath("minor_radius"), "must be < major_radius (" +
+                       brief(json(major)) + ") for a ring torus, got " + brief(json(minor)));
+            }
+            node = std::make_shared<implicit::Torus>(c, major, minor);
+        } else if (type == "quadric") {
+            use({"matrix"});
+            node = std::make_shared<implicit::Quadric>(parseMatrix(r));
+        } else if (type == "plane") {
+            use({"normal", "offset"});
+            const Vec3d n = r.vec3("normal");
+            if (n.length() == 0.0) r.fail(r.childPath("normal"), "must be non-zero, got [0, 0, 0]");
+            node = implicit::makePlane(n, r.number("offset", 0.0));
+        } else if (type == "cylinder") {
+            use({"center", "axis", "radius"});
+            const Vec3d c = r.vec3("center", zero), a = r.vec3("axis", zAxis);
+            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
+            node = implicit::makeCylinder(c, a, r.positive("radius"));
+        } else if (type == "ellipsoid") {
+            use({"center", "radii"});
+            node = implicit::makeEllipsoid(r.vec3("center", zero), r.positiveVec3("radii"));
+        } else if (type == "cone") {
+            use({"apex", "axis", "half_angle_deg"});
+            const Vec3d apex = r.vec3("apex", zero), a = r.vec3("axis", zAxis);
+            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
+            const double angle = r.number("half_angle_deg");
+            if (!(angle > 0.0 && angle < 90.0)) {
+                r.fail(r.childPath("half_angle_deg"),
+                       "must be in (0, 90) degrees, got " + brief(json(angle)));
+            }
+            node = implicit::makeCone(apex, a, angle);
+        } else if (type == "paraboloid") {
+            use({"vertex", "axis", "kind", "a", "b"});
+            const Vec3d v = r.vec3("vertex", zero), a = r.vec3("axis", zAxis);
+            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
+            const bool hyperbolic =
+                r.string("kind", {"elliptic", "hyperbolic"}, std::string("elliptic")) == "hyperbolic";
+            node = implicit::makeParaboloid(v, a, hyperbolic, r.positive("a", 1.0),
+                                            r.positive("b", 1.0));
+        } else if (type == "hyperboloid") {
+            use({"center", "axis", "kind", "radii"});
+            const Vec3d c = r.vec3("center", zero), a = r.vec3("axis", zAxis);
+            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
+            const bool two =
+                r.string("kind", {"one_sheet", "two_sheets"}, std::string("one_sheet")) == "two_sheets";
+            node = implicit::makeHyperboloid(c, a, two, r.positiveVec3("radii", Vec3d(1.0)));
+        } else if (type == "union" || type == "intersection" || type == "difference") {
+            use({"children"});
+            const auto op = type == "union" ? implicit::Csg::Op::Union
+                          : type == "intersection" ? implicit::Csg::Op::Intersection
+                                                   : implicit::Csg::Op::Difference;
+            node = std::make_shared<implicit::Csg>(op, parseChildren(r, 1));
+        } else if (type == "transform") {
+            use({"translate", "rotate_deg", "scale", "child"});
+            Vec3d scale(1.0);
+            if (r.has("scale")) {
+                const json& s = r.raw("scale");
+                scale = s.is_number() ? Vec3d(r.toNumber(s, r.childPath("scale")))
+                                      : r.toVec3(s, r.childPath("scale"));
+                for (int i = 0; i < 3; ++i) {
+                    if (!(scale[i] > 0.0)) {
+                        r.fail(r.childPath("scale"), "must be > 0 (a number or 3 numbers), got " +
+                                                         brief(s));
+                    }
+                }
+            }
+            const Vec3d t = r.vec3("translate", zero), rot = r.vec3("rotate_deg", zero);
+            auto child = parseNode(r.raw("child"), r.childPath("child"), origin);
+            node = std::make_shared<implicit::Transform>(child, t, rot, scale);
+        }
+        r.finish(keys);
+        return node;
+    } catch (const openvdb::Exception& e) {
+        // OpenVDB prefixes messages with the exception name; keep just the text.
+        std::string what = e.what();
+        const auto colon = what.find(": ");
+        if (colon != std::string::npos) what = what.substr(colon + 2);
+        r.fail(path, what);
+    }
+}
+
+} // namespace
+
+Scene parseScene(const std::string& text, const std::string& origin)
+{
+    json j;
+    try {
+        j = json::parse(text);
+    } catch (const json::parse_error& e) {
+        throw SceneError(origin + ": not valid JSON: " + e.what() +
+                         " (scene files are JSON objects; see the README's scene format)");
+    }
+    ObjectReader r(j, "", origin);
+    Scene scene;
+    if (r.has("voxel_size")) scene.voxelSize = r.positive("voxel_size");
+    scene.halfWidth = r.positive("half_width", 3.0);
+    if (scene.halfWidth < 1.0) {
+        r.fail("half_width", "must be >= 1 voxel, got " + brief(json(scene.halfWidth)));
+    }
+    if (r.has("bounds")) {
+        ObjectReader b(r.raw("bounds"), "bounds", origin);
+        const Vec3d lo = b.vec3("min"), hi = b.vec3("max");
+        for (int i = 0; i < 3; ++i) {
+            if (!(lo[i] < hi[i])) {
+                std::ostringstream os;
+                os << "min must be < max in every axis, got min " << lo[i] << " >= max " << hi[i]
+                   << " in axis " << "xyz"[i];
+                b.fail("bounds", os.str());
+            }
+        }
+        b.finish({"min", "max"});
+        scene.bounds = implicit::BBoxd(lo, hi);
+    }
+    scene.shape = parseNode(r.raw("shape"), "shape", origin);
+    r.finish({"voxel_size", "half_width", "bounds", "shape"});
+    scene.json = j.dump();
+    return scene;
+}
+
+Scene loadScene(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw SceneError(path + ": cannot open the scene file (does it exist and is it readable?)");
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    if (in.bad()) throw SceneError(path + ": cannot read the scene file");
+    return parseScene(ss.str(), path);
+}
+
+} // namespace ivdb::scene

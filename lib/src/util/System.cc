@@ -1,0 +1,43 @@
+#include <ivdb/util/System.h>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+namespace ivdb::util {
+
+namespace {
+std::uint64_t readKb(const char* file, const std::string& key)
+{
+    std::ifstream in(file);
+    std::string line;
+    while (std::getline(in, line)) {
+        if (line.compare(0, key.size(), key) == 0) {
+            std::istringstream ss(line.substr(key.size()));
+            std::uint64_t kb = 0;
+            ss >> kb;
+            return kb * 1024;
+        }
+    }
+    return 0;
+}
+} // namespace
+
+std::uint64_t availableMemory() { return readKb("/proc/meminfo", "MemAvailable:"); }
+
+std::uint64_t peakResidentMemory() { return readKb("/proc/self/status", "VmHWM:"); }
+
+std::string formatBytes(double bytes)
+{
+    const char* units[] = {"B", "kB", "MB", "GB", "TB"};
+    int u = 0;
+    while (bytes >= 1000.0 && u < 4) {
+        bytes /= 1000.0;
+        ++u;
+    }
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), u == 0 ? "%.0f %s" : "%.1f %s", bytes, units[u]);
+    return buf;
+}
+
+} // namespace ivdb::util

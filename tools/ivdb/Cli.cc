@@ -1,0 +1,111 @@
+#include "Cli.h"
+
+#include <ivdb/Version.h>
+
+#include <openvdb/openvdb.h>
+
+#include <tbb/global_control.h>
+
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <iostream>
+#include <optional>
+
+#include <unistd.h>
+
+namespace ivdb::cli {
+
+namespace {
+
+std::atomic<bool> gInterrupted{false};
+
+extern "C" void onSigint(int)
+{
+    gInterrupted = true;
+}
+
+} // namespace
+
+Progress::Progress(std::string label): mLabel(std::move(label)), mTerminal(::isatty(2) == 1)
+{
+    std::signal(SIGINT, onSigint);
+}
+
+Progress::~Progress()
+{
+    std::signal(SIGINT, SIG_DFL);
+}
+
+void Progress::start(const char*)
+{
+    mLastPercent = -1;
+}
+
+void Progress::end()
+{
+    if (mTerminal && mLastPercent >= 0) std::fprintf(stderr, "\r\033[K");
+    mLastPercent = -1;
+}
+
+bool Progress::wasInterrupted(int percent)
+{
+    if (mTerminal && percent >= 0 && percent != mLastPercent) {
+        mLastPercent = percent;
+        std::fprintf(stderr, "\r%s: %3d%%", mLabel.c_str(), percent);
+        std::fflush(stderr);
+    }
+    return gInterrupted.load();
+}
+
+void warn(const std::string& what)
+{
+    std::cerr << "ivdb: warning: " << what << std::endl;
+}
+
+int run(int argc, char** argv)
+{
+    try {
+        openvdb::initialize();
+        CLI::App app{"ivdb: implicit surfaces to sparse OpenVDB level sets", "ivdb"};
+        app.require_subcommand(1);
+        app.set_version_flag("--version", std::string("ivdb ") + ivdb::kVersion);
+        std::optional<int> threads;
+        app.add_option("--threads", threads, "Worker threads (default: all cores)")
+            ->check(CLI::PositiveNumber);
+        Action action;
+        addRasterize(app, action);
+        addInfo(app, action);
+        try {
+            app.parse(argc, argv);
+        } catch (const CLI::CallForHelp& e) {
+            return app.exit(e);
+        } catch (const CLI::CallForAllHelp& e) {
+            return app.exit(e);
+        } catch (const CLI::CallForVersion& e) {
+            return app.exit(e);
+        } catch (const CLI::ParseError& e) {
+            std::cerr << "ivdb: error: " << e.what() << "\nRun 'ivdb --help' or 'ivdb COMMAND --help'."
+                      << std::endl;
+            return 2;
+        }
+        std::optional<tbb::global_control> limit;
+        if (threads) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(*threads));
+        return action ? action() : 2;
+    } catch (const openvdb::Exception& e) {
+        // OpenVDB prefixes its messages with the exception type ("IoError: ..."): drop it.
+        std::string what = e.what();
+        const auto colon = what.find(": ");
+        if (colon != std::string::npos && what.find(' ') > colon) what = what.substr(colon + 2);
+        std::cerr << "ivdb: error: " << what << std::endl;
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << "ivdb: error: " << e.what() << std::endl;
+        return 1;
+    } catch (...) {
+        std::cerr << "ivdb: error: unknown failure" << std::endl;
+        return 1;
+    }
+}
+
+} // namespace ivdb::cli

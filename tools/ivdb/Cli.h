@@ -1,0 +1,46 @@
+#pragma once
+
+#include <openvdb/util/NullInterrupter.h>
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace ivdb::cli {
+
+/// @brief Run the `ivdb` command line; returns the process exit code (0 on success).
+/// @details Every error is caught: it prints `ivdb: error: <what>` to stderr and returns 1
+/// (2 for a usage error). Nothing here exits or aborts, so tests can call it.
+int run(int argc, char** argv);
+
+/// @brief The work a subcommand does once its options are parsed; returns the exit code.
+using Action = std::function<int()>;
+
+/// @name Subcommands: each declares its options once (so --help cannot drift) and sets @a action
+/// @{
+void addRasterize(CLI::App& app, Action& action);
+void addInfo(CLI::App& app, Action& action);
+/// @}
+
+/// @brief Progress on stderr when it is a terminal, and cancellation on Ctrl-C (SIGINT).
+class Progress final: public openvdb::util::NullInterrupter
+{
+public:
+    explicit Progress(std::string label);
+    ~Progress() override;
+    void start(const char* name = nullptr) override;
+    void end() override;
+    bool wasInterrupted(int percent = -1) override;
+
+private:
+    std::string mLabel;
+    bool mTerminal;
+    int mLastPercent = -1;
+};
+
+/// @brief Print a warning line `ivdb: warning: <what>` on stderr.
+void warn(const std::string& what);
+
+} // namespace ivdb::cli

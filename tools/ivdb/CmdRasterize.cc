@@ -1,0 +1,131 @@
+// ivdb rasterize: a scene file into a narrow-band level set .vdb.
+#include "Cli.h"
+
+#include <ivdb/Version.h>
+#include <ivdb/io/VdbFile.h>
+#include <ivdb/raster/Rasterize.h>
+#include <ivdb/scene/Scene.h>
+#include <ivdb/util/System.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <optional>
+#include <sstream>
+
+namespace ivdb::cli {
+
+namespace {
+
+struct RasterizeOptions
+{
+    std::string scene, output;
+    std::optional<double> voxelSize, halfWidth;
+    std::string sampling = "sparse";
+    bool quiet = false;
+};
+
+int runRasterize(const RasterizeOptions& opt)
+{
+    const auto t0 = std::chrono::steady_clock::now();
+    scene::Scene sc = scene::loadScene(opt.scene);
+    io::checkOutputPath(opt.output);
+
+    raster::RasterSettings settings;
+    if (opt.voxelSize) {
+        if (!(*opt.voxelSize > 0.0) || !std::isfinite(*opt.voxelSize)) {
+            std::ostringstream os;
+            os << "--voxel-size must be > 0 and finite, got " << *opt.voxelSize;
+            throw std::runtime_error(os.str());
+        }
+        settings.voxelSize = *opt.voxelSize;
+    } else if (sc.voxelSize) {
+        settings.voxelSize = *sc.voxelSize;
+    } else {
+        throw std::runtime_error(opt.scene + ": voxel_size is missing: add \"voxel_size\" to the "
+                                 "scene or pass --voxel-size");
+    }
+    settings.halfWidth = sc.halfWidth;
+    if (opt.halfWidth) {
+        if (!(*opt.halfWidth >= 1.0) || !std::isfinite(*opt.halfWidth)) {
+            std::ostringstream os;
+            os << "--half-width must be >= 1 voxel and finite, got " << *opt.halfWidth;
+            throw std::runtime_error(os.str());
+        }
+        settings.halfWidth = *opt.halfWidth;
+    }
+    settings.bounds = sc.bounds;
+    settings.sampling = opt.sampling == "dense" ? raster::Sampling::Dense : raster::Sampling::Sparse;
+    Progress progress("rasterize " + opt.scene);
+    settings.interrupter = &progress;
+
+    openvdb::FloatGrid::Ptr grid;
+    try {
+        grid = raster::rasterize(sc.shape, settings);
+    } catch (const openvdb::Exception& e) {
+        std::string what = e.what();
+        const auto colon = what.find(": ");
+        if (colon != std::string::npos && what.find(' ') > colon) what = what.substr(colon + 2);
+        throw std::runtime_error(opt.scene + ": " + what);
+    }
+    const auto t1 = std::chrono::steady_clock::now();
+    if (grid->activeVoxelCount() == 0) {
+        std::ostringstream os;
+        os << opt.scene << ": the surface has no voxels at voxel size " << settings.voxelSize
+           << " (no zero crossing inside the bounds, or a shape smaller than a voxel): "
+           << "check the shape and bounds, or use a smaller voxel size; nothing was written";
+        throw std::runtime_error(os.str());
+    }
+    grid->insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
+    grid->insertMeta("ivdb_scene", openvdb::StringMetadata(sc.json));
+    grid->insertMeta("ivdb_sampling", openvdb::StringMetadata(opt.sampling));
+    openvdb::MetaMap fileMeta;
+    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
+    io::writeVdb(opt.output, {grid}, fileMeta);
+    const auto t2 = std::chrono::steady_clock::now();
+
+    if (!opt.quiet) {
+        const double compute = std::chrono::duration<double>(t1 - t0).count();
+        const double total = std::chrono::duration<double>(t2 - t0).count();
+        std::error_code ec;
+        const auto size = std::filesystem::file_size(opt.output, ec);
+        std::printf("%s: %llu active voxels, grid %s, file %s, peak memory %s, compute %.3f s, "
+                    "total %.3f s -> %s\n",
+                    opt.scene.c_str(), (unsigned long long)grid->activeVoxelCount(),
+                    util::formatBytes(double(grid->memUsage())).c_str(),
+                    util::formatBytes(double(size)).c_str(),
+                    util::formatBytes(double(util::peakResidentMemory())).c_str(), compute, total,
+                    opt.output.c_str());
+    }
+    return 0;
+}
+
+} // namespace
+
+void addRasterize(CLI::App& app, Action& action)
+{
+    auto opt = std::make_shared<RasterizeOptions>();
+    CLI::App* cmd = app.add_subcommand("rasterize",
+        "Rasterize a JSON scene into a narrow-band level set .vdb (grid 'surface')");
+    cmd->add_option("scene", opt->scene, "Scene file (JSON; see the README's scene format)")
+        ->required();
+    cmd->add_option("-o,--output", opt->output, "Output .vdb file (written atomically)")
+        ->required();
+    cmd->add_option("--voxel-size", opt->voxelSize,
+                    "World units per voxel (overrides the scene's voxel_size); > 0");
+    cmd->add_option("--half-width", opt->halfWidth,
+                    "Narrow-band half width in voxels (overrides the scene's half_width, "
+                    "default 3); >= 1");
+    cmd->add_option("--sampling", opt->sampling,
+                    "sparse: interval-pruned, cost grows with the surface; dense: every voxel "
+                    "of the bounding box (the reference; refuses if it would not fit in memory)")
+        ->check(CLI::IsMember({"sparse", "dense"}))
+        ->capture_default_str();
+    cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
+    cmd->callback([&action, opt]() { action = [opt]() { return runRasterize(*opt); }; });
+}
+
+} // namespace ivdb::cli
