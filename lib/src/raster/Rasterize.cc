@@ -17,6 +17,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -96,8 +97,9 @@ struct Context
         return static_cast<float>(e);
     }
 
-    /// Band rule for exact shapes, on the stored float value.
-    bool inBand(float v) const { return std::abs(double(v)) < band; }
+    /// The band rule, on the stored float value: strictly inside the float background, so
+    /// every active value is a distance smaller than the background.
+    bool inBand(float v) const { return std::abs(v) < static_cast<float>(band); }
 
     bool interrupted(int percent = -1) const
     {
@@ -461,7 +463,26 @@ openvdb::FloatGrid::Ptr finishBand(const Context& ctx, openvdb::FloatGrid& sampl
     tree.topologyIntersection(interface);
     if (tree.activeVoxelCount() == 0) return samples.copy(); // no surface: an empty band
 
-    auto out = openvdb::tools::sdfToSdf(samples, 0.0f, 1);
+    // OpenVDB's sdfToSdf, with one change: the voxels next to the interface (the boundary
+    // condition) keep our estimate f / |grad f| from the analytic function instead of
+    // FastSweeping's axis-crossing formula, which is off by up to 0.3 voxel on curved surfaces.
+    openvdb::tools::FastSweeping<openvdb::FloatGrid> sweeper;
+    if (!sweeper.initSdf(samples, 0.0f, /*isInputSdf=*/true)) return samples.copy();
+    openvdb::FloatGrid::Ptr out = sweeper.sdfGrid();
+    {
+        const float frozen = 0.5f * std::numeric_limits<float>::max();
+        openvdb::tree::LeafManager<FloatTree> leaves(out->tree());
+        leaves.foreach([&](LeafT& leaf, size_t) {
+            const LeafT* src = samples.tree().probeConstLeaf(leaf.origin());
+            if (!src) return;
+            float* buf = leaf.buffer().data();
+            for (auto it = leaf.beginValueOn(); it; ++it) {
+                if (std::abs(*it) < frozen) buf[it.pos()] = src->getValue(it.pos());
+            }
+        });
+    }
+    if (sweeper.sweepingVoxelCount() > 0) sweeper.sweep(1);
+    out = sweeper.sdfGrid();
     if (ctx.interrupted()) throwInterrupted();
 
     const float bg = static_cast<float>(ctx.band);
