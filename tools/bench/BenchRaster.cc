@@ -1,2 +1,142 @@
-// Placeholder replaced below.
-int main() { return 0; }
+// Micro-benchmarks: each ivdb kernel beside OpenVDB's equivalent, in the same binary and run.
+// Run on demand: build/bin/ivdb_bench [--benchmark_filter=...]; not part of the test suite.
+#include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/Primitives.h>
+#include <ivdb/implicit/Quadric.h>
+#include <ivdb/io/VdbFile.h>
+#include <ivdb/raster/Rasterize.h>
+#include <ivdb/util/System.h>
+
+#include <openvdb/io/File.h>
+#include <openvdb/tools/LevelSetSphere.h>
+
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <string>
+#include <unistd.h>
+
+using namespace ivdb;
+
+namespace {
+
+// A sphere of radius 1 at voxel size 1 / radiusVoxels, half width 3 (the reference
+// case is radius 400 voxels, voxel size 0.0025).
+raster::RasterSettings sphereSettings(int radiusVoxels, raster::Sampling s)
+{
+    raster::RasterSettings r;
+    r.voxelSize = 1.0 / radiusVoxels;
+    r.halfWidth = 3.0;
+    r.sampling = s;
+    return r;
+}
+
+void setCounters(benchmark::State& state, const openvdb::FloatGrid& g)
+{
+    state.counters["active_voxels"] = double(g.activeVoxelCount());
+    state.counters["grid_MB"] = double(g.memUsage()) / 1e6;
+}
+
+void BM_Rasterize_Sparse(benchmark::State& state)
+{
+    const int r = int(state.range(0));
+    auto sphere = std::make_shared<implicit::Sphere>(implicit::Vec3d(0.0), 1.0);
+    const auto s = sphereSettings(r, raster::Sampling::Sparse);
+    openvdb::FloatGrid::Ptr g;
+    for (auto _ : state) {
+        g = raster::rasterize(sphere, s);
+        benchmark::DoNotOptimize(g.get());
+    }
+    setCounters(state, *g);
+}
+
+void BM_Rasterize_Dense(benchmark::State& state)
+{
+    const int r = int(state.range(0));
+    auto sphere = std::make_shared<implicit::Sphere>(implicit::Vec3d(0.0), 1.0);
+    const auto s = sphereSettings(r, raster::Sampling::Dense);
+    openvdb::FloatGrid::Ptr g;
+    for (auto _ : state) {
+        g = raster::rasterize(sphere, s);
+        benchmark::DoNotOptimize(g.get());
+    }
+    setCounters(state, *g);
+    state.counters["samples_MB"] = double(raster::denseMemoryEstimate(sphere, s)) / 1e6;
+}
+
+void BM_OpenVDB_CreateLevelSetSphere(benchmark::State& state)
+{
+    const int r = int(state.range(0));
+    openvdb::FloatGrid::Ptr g;
+    for (auto _ : state) {
+        g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+            1.0f, openvdb::Vec3f(0.0f), 1.0f / float(r), 3.0f);
+        benchmark::DoNotOptimize(g.get());
+    }
+    setCounters(state, *g);
+}
+
+// A non-distance shape: the same sphere as a quadric, rasterized and re-distanced.
+void BM_Rasterize_QuadricSphere(benchmark::State& state)
+{
+    const int r = int(state.range(0));
+    auto q = implicit::makeEllipsoid(implicit::Vec3d(0.0), implicit::Vec3d(1.0));
+    const auto s = sphereSettings(r, raster::Sampling::Sparse);
+    openvdb::FloatGrid::Ptr g;
+    for (auto _ : state) {
+        g = raster::rasterize(q, s);
+        benchmark::DoNotOptimize(g.get());
+    }
+    setCounters(state, *g);
+}
+
+std::string tempPath()
+{
+    return "/tmp/ivdb_bench_" + std::to_string(::getpid()) + ".vdb";
+}
+
+void BM_WriteVdb_Atomic(benchmark::State& state)
+{
+    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+        1.0f, openvdb::Vec3f(0.0f), 1.0f / float(state.range(0)), 3.0f);
+    const std::string path = tempPath();
+    for (auto _ : state) io::writeVdb(path, {g});
+    std::remove(path.c_str());
+}
+
+void BM_OpenVDB_FileWrite(benchmark::State& state)
+{
+    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+        1.0f, openvdb::Vec3f(0.0f), 1.0f / float(state.range(0)), 3.0f);
+    const std::string path = tempPath();
+    for (auto _ : state) {
+        openvdb::io::File f(path);
+        f.write({g});
+        f.close();
+    }
+    std::remove(path.c_str());
+}
+
+} // namespace
+
+BENCHMARK(BM_Rasterize_Sparse)->Arg(50)->Arg(100)->Arg(200)->Arg(400)->Arg(800)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_OpenVDB_CreateLevelSetSphere)->Arg(50)->Arg(100)->Arg(200)->Arg(400)->Arg(800)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Rasterize_Dense)->Arg(50)->Arg(100)->Arg(200)->Arg(400)
+    ->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1)->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+BENCHMARK(BM_Rasterize_QuadricSphere)->Arg(100)->Arg(200)->Arg(400)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_WriteVdb_Atomic)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_OpenVDB_FileWrite)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+int main(int argc, char** argv)
+{
+    openvdb::initialize();
+    benchmark::Initialize(&argc, argv);
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+    benchmark::RunSpecifiedBenchmarks();
+    benchmark::Shutdown();
+    return 0;
+}

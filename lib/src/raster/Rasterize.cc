@@ -552,10 +552,12 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
     if (ctx.exact) {
         ctx.reach = ctx.band;
     } else {
-        // A voxel at distance < band from the surface is within Chebyshev distance
-        // ceil(halfWidth) + 1 of a voxel next to a sign change; the samples must reach one
-        // more voxel for the interface test, and diagonals stretch a Chebyshev step by sqrt(3).
-        ctx.sweepSteps = int(std::ceil(s.halfWidth)) + 1;
+        // A voxel v at distance d < halfWidth from its closest surface point s is within
+        // Chebyshev distance d of s, and s lies in a lattice cube whose corners (Chebyshev
+        // distance <= 1 from s) include a voxel next to a sign change: so v is within
+        // ceil(halfWidth) steps of that voxel. The samples must reach one more voxel for the
+        // interface test, and a Chebyshev step stretches to sqrt(3) along a diagonal.
+        ctx.sweepSteps = int(std::ceil(s.halfWidth));
         ctx.reach = (ctx.sweepSteps * std::sqrt(3.0) + 2.0) * ctx.dx;
     }
     const BBoxd b = ctx.shape->boundingBox();
