@@ -1,6 +1,7 @@
 #include "Cli.h"
 
 #include <ivdb/Version.h>
+#include <ivdb/util/System.h>
 
 #include <openvdb/openvdb.h>
 
@@ -76,6 +77,19 @@ int run(int argc, char** argv)
         Action action;
         addRasterize(app, action);
         addInfo(app, action);
+        // CLI11 reports an unknown command only as "a subcommand is required": name it.
+        for (int i = 1; i < argc; ++i) {
+            const std::string a = argv[i];
+            if (a == "--threads") { ++i; continue; }
+            if (a.rfind("-", 0) == 0) continue;
+            const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
+            if (subs.empty()) {
+                std::cerr << "ivdb: error: unknown command '" << a
+                          << "'; commands: rasterize, info (run 'ivdb --help')" << std::endl;
+                return 2;
+            }
+            break;
+        }
         try {
             app.parse(argc, argv);
         } catch (const CLI::CallForHelp& e) {
@@ -92,15 +106,8 @@ int run(int argc, char** argv)
         std::optional<tbb::global_control> limit;
         if (threads) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(*threads));
         return action ? action() : 2;
-    } catch (const openvdb::Exception& e) {
-        // OpenVDB prefixes its messages with the exception type ("IoError: ..."): drop it.
-        std::string what = e.what();
-        const auto colon = what.find(": ");
-        if (colon != std::string::npos && what.find(' ') > colon) what = what.substr(colon + 2);
-        std::cerr << "ivdb: error: " << what << std::endl;
-        return 1;
     } catch (const std::exception& e) {
-        std::cerr << "ivdb: error: " << e.what() << std::endl;
+        std::cerr << "ivdb: error: " << util::errorText(e) << std::endl;
         return 1;
     } catch (...) {
         std::cerr << "ivdb: error: unknown failure" << std::endl;

@@ -65,11 +65,8 @@ int runRasterize(const RasterizeOptions& opt)
     openvdb::FloatGrid::Ptr grid;
     try {
         grid = raster::rasterize(sc.shape, settings);
-    } catch (const openvdb::Exception& e) {
-        std::string what = e.what();
-        const auto colon = what.find(": ");
-        if (colon != std::string::npos && what.find(' ') > colon) what = what.substr(colon + 2);
-        throw std::runtime_error(opt.scene + ": " + what);
+    } catch (const std::exception& e) {
+        throw std::runtime_error(opt.scene + ": " + util::errorText(e));
     }
     const auto t1 = std::chrono::steady_clock::now();
     if (grid->activeVoxelCount() == 0) {

@@ -82,7 +82,7 @@ Vec3d Transform::gradient(const Vec3d& p) const
 void Transform::values(const double* x, const double* y, const double* z, double* out,
                        std::size_t n) const
 {
-    double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
+    double qx[kMaxBatch] = {}, qy[kMaxBatch] = {}, qz[kMaxBatch] = {};
     for (std::size_t i = 0; i < n; ++i) {
         const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
         qx[i] = q[0];

@@ -1,5 +1,7 @@
 #include <ivdb/io/VdbFile.h>
 
+#include <ivdb/util/System.h>
+
 #include <openvdb/io/Archive.h>
 #include <openvdb/io/File.h>
 
@@ -44,6 +46,142 @@ std::string folderOf(const std::string& path)
     return p.has_parent_path() ? p.parent_path().string() : std::string(".");
 }
 
+/// Bounds-checked reads of the file's own layout, so that a truncated or corrupt file is refused
+/// before OpenVDB's reader sees it (which accepts some truncations and allocates whatever length a
+/// corrupt metadata field claims).
+class LayoutReader
+{
+public:
+    LayoutReader(const std::string& path, std::uint64_t size): mPath(path), mSize(size)
+    {
+        mIn.open(path, std::ios::binary);
+        if (!mIn) ioError(path, std::string("cannot open: ") + std::strerror(errno));
+    }
+
+    std::uint64_t pos() const { return mPos; }
+
+    void seek(std::uint64_t pos)
+    {
+        if (pos > mSize) corrupt("an offset points past the end of the file");
+        mPos = pos;
+        mIn.clear();
+        mIn.seekg(std::streamoff(pos));
+    }
+
+    void bytes(void* out, std::uint64_t n, std::uint64_t end)
+    {
+        if (n > end || mPos > end - n) corrupt("it ends in the middle of a field (truncated?)");
+        mIn.read(static_cast<char*>(out), std::streamsize(n));
+        if (!mIn) corrupt("it cannot be read to the end (truncated?)");
+        mPos += n;
+    }
+
+    void skip(std::uint64_t n, std::uint64_t end)
+    {
+        if (n > end || mPos > end - n) corrupt("a field claims more bytes than the file holds");
+        seek(mPos + n);
+    }
+
+    std::uint32_t u32(std::uint64_t end)
+    {
+        std::uint32_t v = 0;
+        bytes(&v, sizeof(v), end);
+        return v;
+    }
+
+    std::int64_t i64(std::uint64_t end)
+    {
+        std::int64_t v = 0;
+        bytes(&v, sizeof(v), end);
+        return v;
+    }
+
+    std::string str(std::uint64_t end)
+    {
+        const std::uint32_t n = u32(end);
+        if (n > end - mPos || n > (1u << 20)) corrupt("a name claims more bytes than the file holds");
+        std::string s(n, '\0');
+        if (n) bytes(&s[0], n, end);
+        return s;
+    }
+
+    /// A MetaMap: count, then (name, type name, byte count + value) per entry.
+    void metaMap(std::uint64_t end)
+    {
+        const std::uint32_t count = u32(end);
+        if (std::uint64_t(count) * 12 > end - mPos) corrupt("its metadata count is impossible");
+        for (std::uint32_t i = 0; i < count; ++i) {
+            str(end);
+            str(end);
+            skip(u32(end), end);
+        }
+    }
+
+    [[noreturn]] void corrupt(const std::string& why) const
+    {
+        ioError(mPath, "not a valid .vdb file: " + why);
+    }
+
+private:
+    std::string mPath;
+    std::uint64_t mSize, mPos = 0;
+    std::ifstream mIn;
+};
+
+/// Check the header, the file metadata, every grid descriptor's offsets and every grid's metadata.
+void validateLayout(const std::string& path)
+{
+    std::error_code ec;
+    const std::uint64_t size = fs::file_size(path, ec);
+    if (ec) ioError(path, "cannot get the file size: " + ec.message());
+    if (size == 0) ioError(path, "is empty, not a .vdb file");
+    LayoutReader in(path, size);
+    std::int64_t magic = 0;
+    if (size < 8) ioError(path, "is too short to be a .vdb file");
+    in.bytes(&magic, 8, size);
+    if (magic != openvdb::OPENVDB_MAGIC) ioError(path, "is not a .vdb file (no OpenVDB magic number)");
+    const std::uint32_t version = in.u32(size);
+    // Older layouts differ; leave them to OpenVDB's reader.
+    if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) return;
+    in.u32(size);           // library major
+    in.u32(size);           // library minor
+    char hasOffsets = 0;
+    in.bytes(&hasOffsets, 1, size);
+    in.skip(36, size);      // UUID
+    in.metaMap(size);       // file metadata
+    if (!hasOffsets) return; // a stream, not a seekable file: no offsets to check
+    const std::int32_t count = std::int32_t(in.u32(size));
+    if (count <= 0) ioError(path, "holds no grids");
+    if (std::uint64_t(count) * 36 > size - in.pos()) in.corrupt("its grid count is impossible");
+    struct Desc { std::string name; std::int64_t grid, block, end; };
+    std::vector<Desc> grids;
+    for (std::int32_t i = 0; i < count; ++i) {
+        Desc d;
+        d.name = in.str(size);
+        in.str(size);                                  // grid type
+        if (version >= openvdb::OPENVDB_FILE_VERSION_GRID_INSTANCING) in.str(size);
+        d.grid = in.i64(size);
+        d.block = in.i64(size);
+        d.end = in.i64(size);
+        grids.push_back(d);
+        const std::uint64_t header = in.pos();
+        if (d.grid < std::int64_t(header) || d.block < d.grid || d.end < d.block ||
+            std::uint64_t(d.end) > size) {
+            std::ostringstream os;
+            os << "not a valid .vdb file: grid " << i << " ('" << d.name.substr(0, 64)
+               << "') claims bytes " << d.grid << " to " << d.end << " but the file has " << size
+               << " bytes (truncated?)";
+            ioError(path, os.str());
+        }
+        in.seek(std::uint64_t(d.end));
+    }
+    for (const Desc& d : grids) {
+        in.seek(std::uint64_t(d.grid));
+        in.u32(std::uint64_t(d.block)); // compression flags
+        in.metaMap(std::uint64_t(d.block));
+    }
+}
+
 } // namespace
 
 void checkOutputPath(const std::string& path)
@@ -51,6 +189,9 @@ void checkOutputPath(const std::string& path)
     if (path.empty()) ioError("(output)", "the output path is empty");
     std::error_code ec;
     if (fs::is_directory(path, ec)) ioError(path, "is a folder; give a file name such as out.vdb");
+    if (fs::exists(path, ec) && !fs::is_regular_file(path, ec)) {
+        ioError(path, "exists and is not a regular file (a device or a socket?); give a file path");
+    }
     const std::string dir = folderOf(path);
     if (!fs::is_directory(dir, ec)) {
         ioError(path, "the folder '" + dir + "' does not exist; create it first");
@@ -111,20 +252,19 @@ openvdb::GridPtrVec readVdb(const std::string& path)
     if (::access(path.c_str(), R_OK) != 0) {
         ioError(path, std::string("cannot read: ") + std::strerror(errno));
     }
+    if (!fs::is_regular_file(path, ec)) ioError(path, "is not a regular file");
+    validateLayout(path);
+    openvdb::GridPtrVecPtr grids;
     try {
         openvdb::io::File file(path);
         file.open(/*delayLoad=*/false);
-        openvdb::GridPtrVecPtr grids = file.getGrids();
+        grids = file.getGrids();
         file.close();
-        if (!grids) ioError(path, "holds no grids");
-        return *grids;
-    } catch (const openvdb::IoError& e) {
-        std::string what = e.what();
-        if (what.find(path) == std::string::npos) what = path + ": " + what;
-        OPENVDB_THROW(openvdb::IoError, what + " (not a readable .vdb file?)");
     } catch (const std::exception& e) {
-        ioError(path, std::string("not a readable .vdb file: ") + e.what());
+        ioError(path, "not a readable .vdb file: " + util::errorText(e));
     }
+    if (!grids || grids->empty()) ioError(path, "holds no grids");
+    return *grids;
 }
 
 GridInfo describeGrid(const openvdb::GridBase& grid)

@@ -284,7 +284,7 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
 }
 
 /// Dense path: sample every voxel of the region into an array, then build the same grid.
-openvdb::FloatGrid::Ptr sampleDense(const Context& ctx, std::uint64_t memoryLimit)
+openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
 {
     const float bg = static_cast<float>(ctx.band);
     const CoordBBox& reg = ctx.region;
@@ -320,7 +320,6 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx, std::uint64_t memoryLimi
         if (ctx.interrupter && ctx.interrupted(int(90 * done / (nx * ny)))) cancelled = true;
     });
     if (cancelled) throwInterrupted();
-    (void)memoryLimit;
 
     auto at = [&](int i, int j, int k) -> float {
         return samples[(std::uint64_t(i - reg.min().x()) * ny + std::uint64_t(j - reg.min().y())) * nz +
@@ -611,7 +610,7 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
     auto run = [&]() {
         if (ctx.interrupter) ctx.interrupter->start("Rasterizing");
         openvdb::FloatGrid::Ptr grid = settings.sampling == Sampling::Dense
-                                           ? sampleDense(ctx, settings.denseMemoryLimit)
+                                           ? sampleDense(ctx)
                                            : sampleSparse(ctx);
         if (!ctx.exact) grid = finishBand(ctx, *grid);
         openvdb::tools::pruneLevelSet(grid->tree());

@@ -3,6 +3,7 @@
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
+#include <ivdb/util/System.h>
 
 #include <openvdb/Exceptions.h>
 
@@ -56,7 +57,6 @@ public:
 
     const json& raw(const std::string& key)
     {
-        mUsed.insert(key);
         if (!mJson.contains(key)) fail(childPath(key), "is missing");
         return mJson.at(key);
     }
@@ -73,7 +73,7 @@ public:
     double positive(const std::string& key, std::optional<double> def = std::nullopt)
     {
         const double v = number(key, def);
-        if (!(v > 0.0)) fail(childPath(key), "must be > 0, got " + brief(json(v)));
+        if (!(v > 0.0)) fail(childPath(key), "must be > 0, got " + util::formatNumber(v));
         return v;
     }
 
@@ -92,7 +92,7 @@ public:
         for (int i = 0; i < 3; ++i) {
             if (!(v[i] > 0.0)) {
                 fail(childPath(key) + "[" + std::to_string(i) + "]",
-                     "must be > 0, got " + brief(json(v[i])));
+                     "must be > 0, got " + util::formatNumber(v[i]));
             }
         }
         return v;
@@ -113,11 +113,12 @@ public:
         return v.get<std::string>();
     }
 
-    /// Refuse keys that no reader asked for.
-    void finish(const std::vector<std::string>& known) const
+    /// Refuse keys outside @a known (before reading any, so a misspelt key is named rather
+    /// than reported as a missing one).
+    void allowOnly(const std::vector<std::string>& known) const
     {
         for (auto it = mJson.begin(); it != mJson.end(); ++it) {
-            if (!mUsed.count(it.key())) {
+            if (std::find(known.begin(), known.end(), it.key()) == known.end()) {
                 fail(childPath(it.key()), "unknown key; allowed here: " + join(known));
             }
         }
@@ -154,7 +155,6 @@ private:
     const json& mJson;
     std::string mPath;
     const std::string& mOrigin;
-    std::set<std::string> mUsed;
 };
 
 Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin);
@@ -215,58 +215,65 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
         "sphere", "box", "torus", "quadric", "plane", "cylinder", "ellipsoid", "cone",
         "paraboloid", "hyperboloid", "union", "intersection", "difference", "transform"};
     const std::string type = r.string("type", kTypes);
+    static const std::map<std::string, std::vector<std::string>> kKeys = {
+        {"sphere", {"center", "radius"}},
+        {"box", {"center", "size"}},
+        {"torus", {"center", "major_radius", "minor_radius"}},
+        {"quadric", {"matrix"}},
+        {"plane", {"normal", "offset"}},
+        {"cylinder", {"center", "axis", "radius"}},
+        {"ellipsoid", {"center", "radii"}},
+        {"cone", {"apex", "axis", "half_angle_deg"}},
+        {"paraboloid", {"vertex", "axis", "kind", "a", "b"}},
+        {"hyperboloid", {"center", "axis", "kind", "radii"}},
+        {"union", {"children"}},
+        {"intersection", {"children"}},
+        {"difference", {"children"}},
+        {"transform", {"translate", "rotate_deg", "scale", "child"}}};
+    std::vector<std::string> keys = {"type"};
+    const auto& own = kKeys.at(type);
+    keys.insert(keys.end(), own.begin(), own.end());
+    r.allowOnly(keys);
     const Vec3d zero(0.0), zAxis(0.0, 0.0, 1.0);
 
     // Library constructors validate too; their messages get this node's path.
     try {
         Implicit::Ptr node;
-        std::vector<std::string> keys = {"type"};
-        auto use = [&keys](std::initializer_list<const char*> k) {
-            keys.insert(keys.end(), k.begin(), k.end());
-        };
         if (type == "sphere") {
-            use({"center", "radius"});
             node = std::make_shared<implicit::Sphere>(r.vec3("center", zero), r.positive("radius"));
         } else if (type == "box") {
-            use({"center", "size"});
             node = std::make_shared<implicit::Box>(r.vec3("center", zero), r.positiveVec3("size"));
         } else if (type == "torus") {
-            use({"center", "major_radius", "minor_radius"});
             const Vec3d c = r.vec3("center", zero);
             const double major = r.positive("major_radius"), minor = r.positive("minor_radius");
             if (!(minor < major)) {
                 r.fail(r.childPath("minor_radius"), "must be < major_radius (" +
-                       brief(json(major)) + ") for a ring torus, got " + brief(json(minor)));
+                       util::formatNumber(major) + ") for a ring torus, got " +
+                       util::formatNumber(minor));
             }
             node = std::make_shared<implicit::Torus>(c, major, minor);
         } else if (type == "quadric") {
-            use({"matrix"});
             node = std::make_shared<implicit::Quadric>(parseMatrix(r));
         } else if (type == "plane") {
-            use({"normal", "offset"});
             const Vec3d n = r.vec3("normal");
             if (n.length() == 0.0) r.fail(r.childPath("normal"), "must be non-zero, got [0, 0, 0]");
             node = implicit::makePlane(n, r.number("offset", 0.0));
         } else if (type == "cylinder") {
-            use({"center", "axis", "radius"});
             const Vec3d c = r.vec3("center", zero), a = r.vec3("axis", zAxis);
             if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
             node = implicit::makeCylinder(c, a, r.positive("radius"));
         } else if (type == "ellipsoid") {
-            use({"center", "radii"});
             node = implicit::makeEllipsoid(r.vec3("center", zero), r.positiveVec3("radii"));
         } else if (type == "cone") {
-            use({"apex", "axis", "half_angle_deg"});
             const Vec3d apex = r.vec3("apex", zero), a = r.vec3("axis", zAxis);
             if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
             const double angle = r.number("half_angle_deg");
             if (!(angle > 0.0 && angle < 90.0)) {
                 r.fail(r.childPath("half_angle_deg"),
-                       "must be in (0, 90) degrees, got " + brief(json(angle)));
+                       "must be in (0, 90) degrees, got " + util::formatNumber(angle));
             }
             node = implicit::makeCone(apex, a, angle);
         } else if (type == "paraboloid") {
-            use({"vertex", "axis", "kind", "a", "b"});
             const Vec3d v = r.vec3("vertex", zero), a = r.vec3("axis", zAxis);
             if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
             const bool hyperbolic =
@@ -274,20 +281,17 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
             node = implicit::makeParaboloid(v, a, hyperbolic, r.positive("a", 1.0),
                                             r.positive("b", 1.0));
         } else if (type == "hyperboloid") {
-            use({"center", "axis", "kind", "radii"});
             const Vec3d c = r.vec3("center", zero), a = r.vec3("axis", zAxis);
             if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
             const bool two =
                 r.string("kind", {"one_sheet", "two_sheets"}, std::string("one_sheet")) == "two_sheets";
             node = implicit::makeHyperboloid(c, a, two, r.positiveVec3("radii", Vec3d(1.0)));
         } else if (type == "union" || type == "intersection" || type == "difference") {
-            use({"children"});
             const auto op = type == "union" ? implicit::Csg::Op::Union
                           : type == "intersection" ? implicit::Csg::Op::Intersection
                                                    : implicit::Csg::Op::Difference;
             node = std::make_shared<implicit::Csg>(op, parseChildren(r, 1));
         } else if (type == "transform") {
-            use({"translate", "rotate_deg", "scale", "child"});
             Vec3d scale(1.0);
             if (r.has("scale")) {
                 const json& s = r.raw("scale");
@@ -304,14 +308,9 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
             auto child = parseNode(r.raw("child"), r.childPath("child"), origin);
             node = std::make_shared<implicit::Transform>(child, t, rot, scale);
         }
-        r.finish(keys);
         return node;
     } catch (const openvdb::Exception& e) {
-        // OpenVDB prefixes messages with the exception name; keep just the text.
-        std::string what = e.what();
-        const auto colon = what.find(": ");
-        if (colon != std::string::npos) what = what.substr(colon + 2);
-        r.fail(path, what);
+        r.fail(path, util::errorText(e));
     }
 }
 
@@ -322,19 +321,23 @@ Scene parseScene(const std::string& text, const std::string& origin)
     json j;
     try {
         j = json::parse(text);
-    } catch (const json::parse_error& e) {
+    } catch (const json::exception& e) {
+        // parse_error for bad syntax, out_of_range for numbers such as 1e999.
         throw SceneError(origin + ": not valid JSON: " + e.what() +
-                         " (scene files are JSON objects; see the README's scene format)");
+                         " (scene files are JSON objects of finite numbers; see the README's "
+                         "scene format)");
     }
     ObjectReader r(j, "", origin);
+    r.allowOnly({"voxel_size", "half_width", "bounds", "shape"});
     Scene scene;
     if (r.has("voxel_size")) scene.voxelSize = r.positive("voxel_size");
     scene.halfWidth = r.positive("half_width", 3.0);
     if (scene.halfWidth < 1.0) {
-        r.fail("half_width", "must be >= 1 voxel, got " + brief(json(scene.halfWidth)));
+        r.fail("half_width", "must be >= 1 voxel, got " + util::formatNumber(scene.halfWidth));
     }
     if (r.has("bounds")) {
         ObjectReader b(r.raw("bounds"), "bounds", origin);
+        b.allowOnly({"min", "max"});
         const Vec3d lo = b.vec3("min"), hi = b.vec3("max");
         for (int i = 0; i < 3; ++i) {
             if (!(lo[i] < hi[i])) {
@@ -344,11 +347,9 @@ Scene parseScene(const std::string& text, const std::string& origin)
                 b.fail("bounds", os.str());
             }
         }
-        b.finish({"min", "max"});
         scene.bounds = implicit::BBoxd(lo, hi);
     }
     scene.shape = parseNode(r.raw("shape"), "shape", origin);
-    r.finish({"voxel_size", "half_width", "bounds", "shape"});
     scene.json = j.dump();
     return scene;
 }

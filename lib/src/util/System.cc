@@ -1,6 +1,7 @@
 #include <ivdb/util/System.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 
@@ -37,6 +38,33 @@ std::string formatBytes(double bytes)
     }
     char buf[32];
     std::snprintf(buf, sizeof(buf), u == 0 ? "%.0f %s" : "%.1f %s", bytes, units[u]);
+    return buf;
+}
+
+std::string errorText(const std::exception& e)
+{
+    std::string what = e.what();
+    // OpenVDB's exceptions read "IoError: message"; drop every such leading type name.
+    for (;;) {
+        const auto colon = what.find(": ");
+        if (colon == std::string::npos || colon == 0) break;
+        const std::string head = what.substr(0, colon);
+        const bool isType = head.find_first_of(" ./") == std::string::npos &&
+                            (head.size() > 5 && (head.compare(head.size() - 5, 5, "Error") == 0 ||
+                                                 head.compare(head.size() - 5, 5, "ption") == 0));
+        if (!isType) break;
+        what = what.substr(colon + 2);
+    }
+    return what;
+}
+
+std::string formatNumber(double v)
+{
+    char buf[40];
+    for (int precision = 6; precision <= 17; ++precision) {
+        std::snprintf(buf, sizeof(buf), "%.*g", precision, v);
+        if (std::strtod(buf, nullptr) == v) break;
+    }
     return buf;
 }
 

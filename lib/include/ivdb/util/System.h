@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <exception>
 #include <string>
 
 namespace ivdb::util {
@@ -13,5 +14,11 @@ std::uint64_t peakResidentMemory();
 
 /// @brief "12.3 MB"-style text for a byte count (powers of 1000 for MB/GB, as file sizes).
 std::string formatBytes(double bytes);
+
+/// @brief An exception's message without OpenVDB's leading type name ("IoError: ...").
+std::string errorText(const std::exception& e);
+
+/// @brief A number as a person writes it: -1, 0.25, 1e-07 (shortest form that reads back).
+std::string formatNumber(double v);
 
 } // namespace ivdb::util

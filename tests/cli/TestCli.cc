@@ -1,0 +1,394 @@
+// End-to-end runs of the ivdb binary: exit codes, stdout and stderr text, and the files left
+// behind (none on failure; an existing output untouched).
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include <nlohmann/json.hpp>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunResult
+{
+    int exitCode = -1;
+    std::string out, err;
+};
+
+std::string quote(const std::string& s)
+{
+    std::string q = "'";
+    for (char c : s) {
+        if (c == '\'') q += "'\\''";
+        else q += c;
+    }
+    return q + "'";
+}
+
+class TestCli: public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        mDir = fs::temp_directory_path() /
+               ("ivdb-test-cli-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        fs::remove_all(mDir);
+        fs::create_directories(mDir / "run");
+    }
+
+    void TearDown() override
+    {
+        std::error_code ec;
+        fs::remove_all(mDir, ec);
+    }
+
+    /// Run `ivdb ARGS` with the working folder mDir/run, capturing stdout and stderr in files
+    /// outside that folder (so listings of it show only what ivdb made).
+    RunResult run(const std::vector<std::string>& args) const
+    {
+        const fs::path outFile = mDir / "stdout.txt", errFile = mDir / "stderr.txt";
+        // bounded: 60 s and 3 GB of address space, so a runaway run fails instead of hanging
+        std::string cmd = "cd " + quote((mDir / "run").string()) +
+                          " && ulimit -v 3000000 && exec timeout -s KILL 60 " + quote(IVDB_BINARY);
+        for (const auto& a : args) cmd += " " + quote(a);
+        cmd += " >" + quote(outFile.string()) + " 2>" + quote(errFile.string()) + " </dev/null";
+        const int status = std::system(cmd.c_str());
+        RunResult r;
+        if (status != -1 && WIFEXITED(status)) r.exitCode = WEXITSTATUS(status);
+        else r.exitCode = 1000 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+        r.out = readText(outFile);
+        r.err = readText(errFile);
+        return r;
+    }
+
+    /// A path inside the working folder of the runs.
+    std::string path(const std::string& name) const { return (mDir / "run" / name).string(); }
+
+    static std::string readText(const fs::path& p)
+    {
+        std::ifstream in(p, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+
+    void writeText(const std::string& name, const std::string& text) const
+    {
+        std::ofstream(path(name), std::ios::binary | std::ios::trunc) << text;
+    }
+
+    std::set<std::string> listing() const
+    {
+        std::set<std::string> names;
+        for (const auto& e : fs::recursive_directory_iterator(mDir / "run")) {
+            names.insert(fs::relative(e.path(), mDir / "run").string());
+        }
+        return names;
+    }
+
+    static std::string data(const std::string& name)
+    {
+        return std::string(IVDB_DATA_DIR) + "/" + name;
+    }
+
+    static void expectMentions(const std::string& text, const std::vector<std::string>& parts,
+                               const std::string& what)
+    {
+        for (const auto& part : parts) {
+            EXPECT_NE(text.find(part), std::string::npos)
+                << what << ": does not mention '" << part << "':\n" << text;
+        }
+    }
+
+    /// Check a failed run: non-zero exit, `ivdb: error: ` first on stderr naming @a mentions,
+    /// no summary on stdout.
+    static void expectError(const RunResult& r, const std::vector<std::string>& mentions,
+                            const std::string& what)
+    {
+        EXPECT_NE(r.exitCode, 0) << what;
+        EXPECT_LT(r.exitCode, 124) << what << ": timed out or killed by a signal";
+        EXPECT_EQ(r.err.find("bad_alloc"), std::string::npos)
+            << what << ": ran out of memory (3 GB) instead of refusing the input:\n" << r.err;
+        EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << what << ": stderr is:\n" << r.err;
+        expectMentions(r.err, mentions, what);
+        EXPECT_EQ(r.out.find("active voxels"), std::string::npos) << what << ": stdout:\n" << r.out;
+    }
+
+    /// Run `ivdb rasterize` with @a args plus `-o OUTPUT` twice: once with no output file (none
+    /// may appear, nor anything else) and once over an existing file (it must stay byte-identical).
+    void expectRasterizeFails(std::vector<std::string> args, const std::string& output,
+                              const std::vector<std::string>& mentions, const std::string& what)
+    {
+        args.insert(args.begin(), "rasterize");
+        args.push_back("-o");
+        args.push_back(output);
+        {
+            SCOPED_TRACE(what + " (no existing output)");
+            const std::set<std::string> before = listing();
+            const RunResult r = run(args);
+            expectError(r, mentions, what);
+            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
+        }
+        const fs::path out = fs::path(path("")) / output;
+        // an output that cannot exist as a file (missing folder, or a folder itself)
+        if (!fs::is_directory(out.parent_path()) || fs::is_directory(out)) return;
+        {
+            SCOPED_TRACE(what + " (existing output)");
+            const std::string old = "an existing output that must not change\n";
+            std::ofstream(out, std::ios::binary | std::ios::trunc) << old;
+            const std::set<std::string> before = listing();
+            const RunResult r = run(args);
+            expectError(r, mentions, what);
+            EXPECT_EQ(readText(out), old) << what << ": the existing output changed";
+            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
+            fs::remove(out);
+        }
+    }
+
+    /// Rasterize @a scene into @a output (in the run folder); asserts success.
+    RunResult rasterize(const std::string& scene, const std::string& output,
+                        std::vector<std::string> extra = {}) const
+    {
+        std::vector<std::string> args = {"rasterize", scene, "-o", output};
+        args.insert(args.end(), extra.begin(), extra.end());
+        RunResult r = run(args);
+        EXPECT_EQ(r.exitCode, 0) << "stderr:\n" << r.err;
+        return r;
+    }
+
+    /// `ivdb info --json FILE`, parsed.
+    nlohmann::json infoJson(const std::string& file) const
+    {
+        const RunResult r = run({"info", file, "--json"});
+        EXPECT_EQ(r.exitCode, 0) << r.err;
+        EXPECT_EQ(r.err, "");
+        try {
+            return nlohmann::json::parse(r.out);
+        } catch (const std::exception& e) {
+            ADD_FAILURE() << "info --json printed invalid JSON (" << e.what() << "):\n" << r.out;
+            return nlohmann::json();
+        }
+    }
+
+    fs::path mDir;
+};
+
+TEST_F(TestCli, Help)
+{
+    RunResult r = run({"--help"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    expectMentions(r.out, {"rasterize", "info", "--help"}, "ivdb --help");
+
+    r = run({"rasterize", "--help"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    expectMentions(r.out, {"--voxel-size", "--half-width", "--sampling", "sparse", "dense",
+                           "--output"}, "ivdb rasterize --help");
+
+    r = run({"info", "--help"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    expectMentions(r.out, {"--json"}, "ivdb info --help");
+    EXPECT_TRUE(listing().empty());
+}
+
+TEST_F(TestCli, UnknownSubcommandAndUsageErrors)
+{
+    RunResult r = run({"frobnicate", "x.json"});
+    expectError(r, {"frobnicate"}, "unknown subcommand");
+    r = run({});
+    expectError(r, {}, "no subcommand");
+    r = run({"rasterize", data("sphere.json")});
+    expectError(r, {"--output"}, "missing -o");
+    r = run({"rasterize", data("sphere.json"), "-o", "a.vdb", "--voxel-size", "abc"});
+    expectError(r, {"--voxel-size", "abc"}, "non-numeric voxel size");
+    r = run({"info"});
+    expectError(r, {"file"}, "info without a file");
+    EXPECT_TRUE(listing().empty());
+}
+
+TEST_F(TestCli, RasterizeAndInfo)
+{
+    const RunResult r = rasterize(data("sphere.json"), "X.vdb");
+    EXPECT_EQ(r.err, "");
+    // exactly one summary line, naming the voxel count
+    ASSERT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << r.out;
+    expectMentions(r.out, {"active voxels", "sphere.json", "X.vdb"}, "summary");
+    EXPECT_EQ(listing(), std::set<std::string>({"X.vdb"}));
+
+    // what OpenVDB itself reads from the file
+    openvdb::io::File file(path("X.vdb"));
+    file.open();
+    auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("surface"));
+    file.close();
+    ASSERT_TRUE(grid);
+    const openvdb::Index64 active = grid->activeVoxelCount();
+    EXPECT_GT(active, 0u);
+    EXPECT_NE(r.out.find(" " + std::to_string(active) + " active voxels"), std::string::npos)
+        << r.out;
+    EXPECT_TRUE(grid->getMetadata<openvdb::StringMetadata>("ivdb_scene"));
+    EXPECT_TRUE(grid->getMetadata<openvdb::StringMetadata>("ivdb_version"));
+    // about 4 pi r^2 / h^2 * (2 * half width) voxels for a unit sphere at h = 0.01
+    EXPECT_NEAR(double(active), 4 * M_PI * 1e4 * 6, 0.1 * 4 * M_PI * 1e4 * 6);
+
+    // info, text
+    RunResult t = run({"info", "X.vdb"});
+    EXPECT_EQ(t.exitCode, 0) << t.err;
+    expectMentions(t.out, {"surface", "level set", "float", "0.01", std::to_string(active)},
+                   "info");
+
+    // info, JSON
+    const nlohmann::json j = infoJson("X.vdb");
+    ASSERT_TRUE(j.contains("grids")) << j.dump();
+    ASSERT_EQ(j["grids"].size(), 1u);
+    const nlohmann::json& g = j["grids"][0];
+    EXPECT_EQ(g.value("name", ""), "surface");
+    EXPECT_EQ(g.value("class", ""), "level set");
+    EXPECT_EQ(g.value("value_type", ""), "float");
+    ASSERT_TRUE(g["voxel_size"].is_array());
+    ASSERT_EQ(g["voxel_size"].size(), 3u);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(g["voxel_size"][i].get<double>(), 0.01, 1e-9);
+    EXPECT_EQ(g["active_voxels"].get<openvdb::Index64>(), active);
+    EXPECT_NEAR(g["background"].get<double>(), 0.03, 1e-6);
+    const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_EQ(g["index_bbox"]["min"][i].get<int>(), box.min()[i]);
+        EXPECT_EQ(g["index_bbox"]["max"][i].get<int>(), box.max()[i]);
+        EXPECT_NEAR(g["world_bbox"]["min"][i].get<double>(), -1.03, 0.011);
+        EXPECT_NEAR(g["world_bbox"]["max"][i].get<double>(), 1.03, 0.011);
+    }
+    EXPECT_EQ(listing(), std::set<std::string>({"X.vdb"}));
+}
+
+TEST_F(TestCli, OptionOverrides)
+{
+    rasterize(data("sphere.json"), "fine.vdb");
+    rasterize(data("sphere.json"), "coarse.vdb", {"--voxel-size", "0.02"});
+    const nlohmann::json fine = infoJson("fine.vdb"), coarse = infoJson("coarse.vdb");
+    ASSERT_EQ(coarse["grids"].size(), 1u);
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(coarse["grids"][0]["voxel_size"][i].get<double>(), 0.02, 1e-9);
+    }
+    EXPECT_NEAR(coarse["grids"][0]["background"].get<double>(), 0.06, 1e-6);
+    // band voxels scale with the area in voxels: a quarter at twice the voxel size
+    const double ratio = coarse["grids"][0]["active_voxels"].get<double>() /
+                         fine["grids"][0]["active_voxels"].get<double>();
+    EXPECT_NEAR(ratio, 0.25, 0.03);
+
+    // half width 2 instead of 3: background 0.02, about 2/3 of the voxels
+    rasterize(data("sphere.json"), "thin.vdb", {"--half-width", "2"});
+    const nlohmann::json thin = infoJson("thin.vdb");
+    EXPECT_NEAR(thin["grids"][0]["background"].get<double>(), 0.02, 1e-6);
+    EXPECT_NEAR(thin["grids"][0]["active_voxels"].get<double>() /
+                    fine["grids"][0]["active_voxels"].get<double>(), 2.0 / 3.0, 0.05);
+
+    // dense sampling gives the same voxels
+    rasterize(data("sphere.json"), "dense.vdb", {"--voxel-size", "0.02", "--sampling", "dense"});
+    const nlohmann::json dense = infoJson("dense.vdb");
+    EXPECT_EQ(dense["grids"][0]["active_voxels"], coarse["grids"][0]["active_voxels"]);
+    EXPECT_EQ(dense["grids"][0]["index_bbox"], coarse["grids"][0]["index_bbox"]);
+
+    // a scene without voxel_size takes it from the command line
+    writeText("novoxel.json", R"({"shape": {"type": "sphere", "radius": 0.5}})");
+    rasterize("novoxel.json", "novoxel.vdb", {"--voxel-size", "0.05"});
+    const nlohmann::json nv = infoJson("novoxel.vdb");
+    EXPECT_NEAR(nv["grids"][0]["voxel_size"][0].get<double>(), 0.05, 1e-9);
+    // and --quiet prints nothing
+    const RunResult q = rasterize("novoxel.json", "quiet.vdb", {"--voxel-size", "0.05", "-q"});
+    EXPECT_EQ(q.out, "");
+}
+
+TEST_F(TestCli, BadScenes)
+{
+    writeText("neg.json", R"({"voxel_size": 0.01, "shape": {"type": "union", "children": [
+        {"type": "sphere", "radius": 1},
+        {"type": "sphere", "center": [1, 0, 0], "radius": 1},
+        {"type": "sphere", "center": [2, 0, 0], "radius": -1}]}})");
+    expectRasterizeFails({"neg.json"}, "out.vdb", {"neg.json", "shape.children[2].radius", "-1"},
+                         "negative radius");
+
+    writeText("key.json", R"({"voxel_size": 0.01,
+        "shape": {"type": "sphere", "radius": 1, "radus": 1}})");
+    expectRasterizeFails({"key.json"}, "out.vdb", {"key.json", "shape.radus", "unknown"},
+                         "unknown key");
+
+    writeText("bad.json", R"({"voxel_size": 0.01, "shape": {"type": "sphere", "radius": 1})");
+    expectRasterizeFails({"bad.json"}, "out.vdb", {"bad.json", "JSON"}, "invalid JSON");
+
+    expectRasterizeFails({"missing.json"}, "out.vdb", {"missing.json"}, "missing scene file");
+
+    writeText("plane.json", R"({"voxel_size": 0.05,
+        "shape": {"type": "plane", "normal": [0, 0, 1], "offset": 0}})");
+    expectRasterizeFails({"plane.json"}, "out.vdb", {"plane.json", "bounds"}, "unbounded plane");
+
+    writeText("novoxel.json", R"({"shape": {"type": "sphere", "radius": 1}})");
+    writeText("huge.json", R"({"voxel_size": 0.01, "shape": {"type": "sphere", "radius": 1e999}})");
+    expectRasterizeFails({"huge.json"}, "out.vdb", {"huge.json", "1e999"}, "radius 1e999");
+
+    expectRasterizeFails({"novoxel.json"}, "out.vdb",
+                         {"novoxel.json", "voxel_size", "--voxel-size"},
+                         "no voxel size anywhere");
+}
+
+TEST_F(TestCli, BadOptions)
+{
+    const std::string scene = data("sphere.json");
+    expectRasterizeFails({scene, "--voxel-size", "0"}, "out.vdb", {"--voxel-size", "0"},
+                         "--voxel-size 0");
+    expectRasterizeFails({scene, "--voxel-size", "-1"}, "out.vdb", {"--voxel-size", "-1"},
+                         "--voxel-size -1");
+    expectRasterizeFails({scene, "--half-width", "0.5"}, "out.vdb", {"--half-width", "0.5"},
+                         "--half-width 0.5");
+    expectRasterizeFails({scene, "--sampling", "foo"}, "out.vdb", {"--sampling", "foo"},
+                         "--sampling foo");
+    expectRasterizeFails({scene}, "nodir/out.vdb", {"nodir/out.vdb", "nodir"},
+                         "output into a missing folder");
+    EXPECT_FALSE(fs::exists(path("nodir")));
+    fs::create_directories(path("outdir"));
+    expectRasterizeFails({scene}, "outdir", {"outdir", "folder"}, "output is a folder");
+    EXPECT_TRUE(fs::is_empty(path("outdir")));
+}
+
+TEST_F(TestCli, InfoBadFiles)
+{
+    RunResult r = run({"info", "missing.vdb"});
+    expectError(r, {"missing.vdb"}, "info on a missing file");
+
+    writeText("text.vdb", "hello, this is text\n");
+    r = run({"info", "text.vdb"});
+    expectError(r, {"text.vdb"}, "info on a text file");
+    // the CLI drops OpenVDB's exception-type prefix ("IoError: ...") from messages
+    EXPECT_EQ(r.err.find("IoError"), std::string::npos) << r.err;
+
+    ASSERT_EQ(rasterize(data("sphere.json"), "good.vdb", {"--voxel-size", "0.05"}).exitCode, 0);
+    const std::string bytes = readText(path("good.vdb"));
+    ASSERT_GT(bytes.size(), 1000u);
+    // 20: in the header; 200: in the grid metadata, where OpenVDB reads garbage lengths
+    for (std::size_t n : {std::size_t(20), std::size_t(200), bytes.size() / 2, bytes.size() - 1}) {
+        const std::string name = "cut" + std::to_string(n) + ".vdb";
+        writeText(name, bytes.substr(0, n));
+        r = run({"info", name});
+        expectError(r, {name}, "info on a file truncated at " + std::to_string(n));
+        r = run({"info", name, "--json"});
+        expectError(r, {name}, "info --json on a file truncated at " + std::to_string(n));
+    }
+    fs::create_directories(path("folder.vdb"));
+    r = run({"info", "folder.vdb"});
+    expectError(r, {"folder.vdb", "folder"}, "info on a folder");
+}
+
+} // namespace
