@@ -7,12 +7,16 @@
 #include <ivdb/raster/Rasterize.h>
 #include <ivdb/util/System.h>
 
+#include <ivdb/diff/Differential.h>
+
 #include <openvdb/io/File.h>
+#include <openvdb/tools/GridOperators.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
 #include <benchmark/benchmark.h>
 
 #include <cstdio>
+#include <map>
 #include <string>
 #include <unistd.h>
 
@@ -117,8 +121,49 @@ void BM_OpenVDB_FileWrite(benchmark::State& state)
     std::remove(path.c_str());
 }
 
+openvdb::FloatGrid::Ptr benchSphere(int radiusVoxels)
+{
+    static std::map<int, openvdb::FloatGrid::Ptr> cache;
+    auto& g = cache[radiusVoxels];
+    if (!g) {
+        g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+            1.0f, openvdb::Vec3f(0.0f), 1.0f / float(radiusVoxels), 3.0f);
+    }
+    return g;
+}
+
+void BM_Gradient(benchmark::State& state)
+{
+    auto phi = benchSphere(int(state.range(0)));
+    for (auto _ : state) benchmark::DoNotOptimize(diff::gradient(*phi).get());
+}
+
+void BM_OpenVDB_Gradient(benchmark::State& state)
+{
+    auto phi = benchSphere(int(state.range(0)));
+    for (auto _ : state) benchmark::DoNotOptimize(openvdb::tools::gradient(*phi).get());
+}
+
+void BM_MeanCurvature(benchmark::State& state)
+{
+    auto phi = benchSphere(int(state.range(0)));
+    for (auto _ : state) {
+        benchmark::DoNotOptimize(diff::curvature(*phi, diff::Curvature::Mean).get());
+    }
+}
+
+void BM_OpenVDB_MeanCurvature(benchmark::State& state)
+{
+    auto phi = benchSphere(int(state.range(0)));
+    for (auto _ : state) benchmark::DoNotOptimize(openvdb::tools::meanCurvature(*phi).get());
+}
+
 } // namespace
 
+BENCHMARK(BM_Gradient)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_OpenVDB_Gradient)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_MeanCurvature)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_OpenVDB_MeanCurvature)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Rasterize_Sparse)->Arg(50)->Arg(100)->Arg(200)->Arg(400)->Arg(800)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OpenVDB_CreateLevelSetSphere)->Arg(50)->Arg(100)->Arg(200)->Arg(400)->Arg(800)

@@ -8,6 +8,7 @@
 #include <tbb/global_control.h>
 
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
@@ -59,6 +60,35 @@ bool Progress::wasInterrupted(int percent)
     return gInterrupted.load();
 }
 
+raster::RasterSettings sceneSettings(const scene::Scene& sc, const std::string& scenePath,
+                                     std::optional<double> voxelSize,
+                                     std::optional<double> halfWidth)
+{
+    raster::RasterSettings settings;
+    if (voxelSize) {
+        if (!(*voxelSize > 0.0) || !std::isfinite(*voxelSize)) {
+            throw std::runtime_error("--voxel-size must be > 0 and finite, got " +
+                                     util::formatNumber(*voxelSize));
+        }
+        settings.voxelSize = *voxelSize;
+    } else if (sc.voxelSize) {
+        settings.voxelSize = *sc.voxelSize;
+    } else {
+        throw std::runtime_error(scenePath + ": voxel_size is missing: add \"voxel_size\" to the "
+                                 "scene or pass --voxel-size");
+    }
+    settings.halfWidth = sc.halfWidth;
+    if (halfWidth) {
+        if (!(*halfWidth >= 1.0) || !std::isfinite(*halfWidth)) {
+            throw std::runtime_error("--half-width must be >= 1 voxel and finite, got " +
+                                     util::formatNumber(*halfWidth));
+        }
+        settings.halfWidth = *halfWidth;
+    }
+    settings.bounds = sc.bounds;
+    return settings;
+}
+
 void warn(const std::string& what)
 {
     std::cerr << "ivdb: warning: " << what << std::endl;
@@ -77,6 +107,9 @@ int run(int argc, char** argv)
         Action action;
         addRasterize(app, action);
         addInfo(app, action);
+        addGradient(app, action);
+        addCurvature(app, action);
+        addCompareGradient(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {
             const std::string a = argv[i];
@@ -85,7 +118,7 @@ int run(int argc, char** argv)
             const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
             if (subs.empty()) {
                 std::cerr << "ivdb: error: unknown command '" << a
-                          << "'; commands: rasterize, info (run 'ivdb --help')" << std::endl;
+                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient (run 'ivdb --help')" << std::endl;
                 return 2;
             }
             break;

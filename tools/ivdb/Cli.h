@@ -1,11 +1,15 @@
 #pragma once
 
+#include <ivdb/raster/Rasterize.h>
+#include <ivdb/scene/Scene.h>
+
 #include <openvdb/util/NullInterrupter.h>
 
 #include <CLI/CLI.hpp>
 
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 namespace ivdb::cli {
@@ -22,7 +26,16 @@ using Action = std::function<int()>;
 /// @{
 void addRasterize(CLI::App& app, Action& action);
 void addInfo(CLI::App& app, Action& action);
+void addGradient(CLI::App& app, Action& action);
+void addCurvature(CLI::App& app, Action& action);
+void addCompareGradient(CLI::App& app, Action& action);
 /// @}
+
+/// @brief Rasterizer settings from a scene and the command line's --voxel-size and --half-width.
+/// @throw std::runtime_error naming the option or the scene file when a value is missing or bad
+raster::RasterSettings sceneSettings(const scene::Scene& scene, const std::string& scenePath,
+                                     std::optional<double> voxelSize,
+                                     std::optional<double> halfWidth);
 
 /// @brief Progress on stderr when it is a terminal, and cancellation on Ctrl-C (SIGINT).
 class Progress final: public openvdb::util::NullInterrupter

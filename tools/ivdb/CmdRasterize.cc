@@ -34,30 +34,7 @@ int runRasterize(const RasterizeOptions& opt)
     scene::Scene sc = scene::loadScene(opt.scene);
     io::checkOutputPath(opt.output);
 
-    raster::RasterSettings settings;
-    if (opt.voxelSize) {
-        if (!(*opt.voxelSize > 0.0) || !std::isfinite(*opt.voxelSize)) {
-            std::ostringstream os;
-            os << "--voxel-size must be > 0 and finite, got " << *opt.voxelSize;
-            throw std::runtime_error(os.str());
-        }
-        settings.voxelSize = *opt.voxelSize;
-    } else if (sc.voxelSize) {
-        settings.voxelSize = *sc.voxelSize;
-    } else {
-        throw std::runtime_error(opt.scene + ": voxel_size is missing: add \"voxel_size\" to the "
-                                 "scene or pass --voxel-size");
-    }
-    settings.halfWidth = sc.halfWidth;
-    if (opt.halfWidth) {
-        if (!(*opt.halfWidth >= 1.0) || !std::isfinite(*opt.halfWidth)) {
-            std::ostringstream os;
-            os << "--half-width must be >= 1 voxel and finite, got " << *opt.halfWidth;
-            throw std::runtime_error(os.str());
-        }
-        settings.halfWidth = *opt.halfWidth;
-    }
-    settings.bounds = sc.bounds;
+    raster::RasterSettings settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
     settings.sampling = opt.sampling == "dense" ? raster::Sampling::Dense : raster::Sampling::Sparse;
     Progress progress("rasterize " + opt.scene);
     settings.interrupter = &progress;

@@ -267,6 +267,24 @@ openvdb::GridPtrVec readVdb(const std::string& path)
     return *grids;
 }
 
+openvdb::GridBase::Ptr selectGrid(const openvdb::GridPtrVec& grids, const std::string& path,
+                                  const std::string& name)
+{
+    std::string held;
+    for (const auto& g : grids) {
+        if (!name.empty() && g->getName() == name) return g;
+        if (name.empty() && g->getGridClass() == openvdb::GRID_LEVEL_SET) return g;
+        held += (held.empty() ? "" : ", ") + std::string("'") + g->getName() + "' (" +
+                openvdb::GridBase::gridClassToString(g->getGridClass()) + ", " + g->valueType() + ")";
+    }
+    if (name.empty()) {
+        OPENVDB_THROW(openvdb::LookupError, path + ": holds no level set grid (it holds " + held +
+                                                "); pick a grid with --grid NAME");
+    }
+    OPENVDB_THROW(openvdb::LookupError, path + ": no grid named '" + name + "' (it holds " + held +
+                                            "); pick one of those with --grid");
+}
+
 GridInfo describeGrid(const openvdb::GridBase& grid)
 {
     GridInfo info;

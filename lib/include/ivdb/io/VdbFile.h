@@ -27,6 +27,12 @@ void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
 /// truncated or corrupt
 openvdb::GridPtrVec readVdb(const std::string& path);
 
+/// @brief The grid named @a name in @a grids, or the first level set when @a name is empty.
+/// @param path  the file the grids came from, for messages
+/// @throw openvdb::LookupError naming the file, the grid and what the file holds
+openvdb::GridBase::Ptr selectGrid(const openvdb::GridPtrVec& grids, const std::string& path,
+                                  const std::string& name);
+
 /// @brief What `ivdb info` reports about a grid.
 struct GridInfo
 {

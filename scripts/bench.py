@@ -1,0 +1,172 @@
+#!/usr/bin/env python3
+"""Performance figures for the README: run after scripts/build.sh.
+
+Section "core" (rasterizing):
+
+Measures, in one run and interleaved so machine noise hits both sides alike:
+  * compute: ivdb's sparse rasterizer vs openvdb::tools::createLevelSetSphere (Google Benchmark,
+    build/bin/ivdb_bench, median of repetitions);
+  * end to end: `ivdb rasterize` vs `vdb_tool -sphere ... -write` (start, compute, write);
+  * sparse vs dense: wall time and peak memory of `ivdb rasterize` at several resolutions.
+Section "diff" (gradient and mean curvature of the radius-400 sphere):
+  * compute: diff::gradient / diff::curvature vs openvdb::tools::gradient / meanCurvature;
+  * end to end: `ivdb gradient|curvature IN -o OUT` vs `vdb_tool -read IN -grad|-curvature -write OUT`.
+Prints Markdown tables. Usage: scripts/bench.py [--section core|diff|all] [--reps N] [--quick]
+"""
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+IVDB = os.path.join(ROOT, "build", "bin", "ivdb")
+BENCH = os.path.join(ROOT, "build", "bin", "ivdb_bench")
+
+
+def run(cmd):
+    """Wall time (s) and peak RSS (MB) of one command."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    err = proc.stderr.read().decode()
+    proc.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        sys.exit(f"failed: {' '.join(cmd)}\n{err}")
+    return wall, usage.ru_maxrss / 1024.0
+
+
+def median_runs(cmds, reps):
+    """Interleave the commands reps times; median wall time and peak memory of each."""
+    times = {k: [] for k in cmds}
+    mems = {k: [] for k in cmds}
+    for _ in range(reps):
+        for k, cmd in cmds.items():
+            w, m = run(cmd)
+            times[k].append(w)
+            mems[k].append(m)
+    return ({k: statistics.median(v) for k, v in times.items()},
+            {k: statistics.median(v) for k, v in mems.items()})
+
+
+def sphere_scene(folder, radius_voxels):
+    path = os.path.join(folder, f"sphere_{radius_voxels}.json")
+    with open(path, "w") as f:
+        json.dump({"voxel_size": 1.0 / radius_voxels, "half_width": 3,
+                   "shape": {"type": "sphere", "center": [0, 0, 0], "radius": 1}}, f)
+    return path
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
+    ap.add_argument("--section", choices=["core", "diff", "all"], default="all")
+    args = ap.parse_args()
+    reps = 3 if args.quick else args.reps
+    big = 200 if args.quick else 400
+
+    with tempfile.TemporaryDirectory() as tmp:
+        print(f"# ivdb benchmark ({os.cpu_count()} cores), medians of {reps} runs\n")
+        if args.section in ("diff", "all"):
+            bench_diff(tmp, big, reps)
+        if args.section in ("core", "all"):
+            bench_core(tmp, big, reps, args.quick)
+
+
+def gbench_medians(pattern, reps):
+    res = subprocess.run([BENCH, f"--benchmark_filter={pattern}", f"--benchmark_repetitions={reps}",
+                          "--benchmark_format=json"], check=True, capture_output=True, text=True)
+    return {b["run_name"].split("/")[0]: b["real_time"]
+            for b in json.loads(res.stdout)["benchmarks"] if b.get("aggregate_name") == "median"}
+
+
+def bench_diff(tmp, big, reps):
+    med = gbench_medians(f"(Gradient|Curvature)/{big}", reps)
+    print("| compute only (Google Benchmark), sphere radius %d voxels | ivdb | OpenVDB | ivdb is |" % big)
+    print("|---|---|---|---|")
+    for name, ours, ref in (("gradient vs tools::gradient", "BM_Gradient", "BM_OpenVDB_Gradient"),
+                            ("mean curvature vs tools::meanCurvature", "BM_MeanCurvature",
+                             "BM_OpenVDB_MeanCurvature")):
+        print(f"| {name} | {med[ours]:.0f} ms | {med[ref]:.0f} ms | **{med[ref] / med[ours]:.2f}x faster** |")
+    print()
+    scene = sphere_scene(tmp, big)
+    src = os.path.join(tmp, "in.vdb")
+    run([IVDB, "rasterize", scene, "-o", src, "-q"])
+    out_a, out_b = os.path.join(tmp, "a.vdb"), os.path.join(tmp, "b.vdb")
+    t, m = median_runs({
+        "ivdb gradient": [IVDB, "gradient", src, "-o", out_a, "-q"],
+        "vdb_tool -grad": ["vdb_tool", "-read", src, "-grad", "-write", out_b],
+        "ivdb curvature": [IVDB, "curvature", src, "-o", out_a, "-q"],
+        "vdb_tool -curvature": ["vdb_tool", "-read", src, "-curvature", "-write", out_b],
+    }, reps)
+    print("| end to end (read, compute, write), sphere radius %d voxels | ivdb | vdb_tool | ivdb is |" % big)
+    print("|---|---|---|---|")
+    for op in ("gradient", "curvature"):
+        a, b = f"ivdb {op}", "vdb_tool -grad" if op == "gradient" else "vdb_tool -curvature"
+        print(f"| {op}: wall time | {t[a]:.2f} s | {t[b]:.2f} s | **{t[b] / t[a]:.2f}x faster** |")
+        print(f"| {op}: peak memory | {m[a]:.0f} MB | {m[b]:.0f} MB | {m[b] / m[a]:.2f}x less |")
+    print()
+
+
+def bench_core(tmp, big, reps, quick):
+    out = os.path.join(tmp, "out.vdb")
+    med = gbench_medians(f"(Rasterize_Sparse|CreateLevelSetSphere|Rasterize_Dense)/{big}/", reps)
+    ours, ref = med["BM_Rasterize_Sparse"], med["BM_OpenVDB_CreateLevelSetSphere"]
+    dense = med["BM_Rasterize_Dense"]
+    print("| compute only (Google Benchmark), sphere radius %d voxels | time | ivdb sparse is |" % big)
+    print("|---|---|---|")
+    print(f"| ivdb sparse | {ours:.0f} ms | |")
+    print(f"| openvdb::tools::createLevelSetSphere | {ref:.0f} ms | **{ref / ours:.2f}x faster** |")
+    print(f"| ivdb dense | {dense:.0f} ms | **{dense / ours:.1f}x faster** |\n")
+
+    # End to end with write.
+    scene = sphere_scene(tmp, big)
+    t, m = median_runs({
+        "ivdb": [IVDB, "rasterize", scene, "-o", out, "-q"],
+        "vdb_tool": ["vdb_tool", "-sphere", f"voxel={1.0 / big}", "radius=1", "-write",
+                     os.path.join(tmp, "tool.vdb")],
+    }, reps)
+    print("| end to end, sphere radius %d voxels | ivdb rasterize | vdb_tool -sphere -write | ivdb is |" % big)
+    print("|---|---|---|---|")
+    print(f"| wall time | {t['ivdb']:.2f} s | {t['vdb_tool']:.2f} s | **{t['vdb_tool'] / t['ivdb']:.2f}x faster** |")
+    print(f"| peak memory | {m['ivdb']:.0f} MB | {m['vdb_tool']:.0f} MB | {m['vdb_tool'] / m['ivdb']:.2f}x less |\n")
+
+    # Sparse vs dense, end to end.
+    print("| radius (voxels) | sparse time | dense time | time ratio | sparse memory | dense memory | memory ratio |")
+    print("|---|---|---|---|---|---|---|")
+    for r in ([50, 100, 200] if quick else [50, 100, 200, 400]):
+        scene = sphere_scene(tmp, r)
+        t, m = median_runs({
+            "sparse": [IVDB, "rasterize", scene, "-o", out, "-q"],
+            "dense": [IVDB, "rasterize", scene, "-o", out, "-q", "--sampling", "dense"],
+        }, reps if r < 400 else min(reps, 3))
+        print(f"| {r} | {t['sparse']:.3f} s | {t['dense']:.3f} s | **{t['dense'] / t['sparse']:.1f}x** "
+              f"| {m['sparse']:.0f} MB | {m['dense']:.0f} MB | **{m['dense'] / m['sparse']:.1f}x** |")
+    print()
+
+    # Scaling of the sparse compute with resolution.
+    rows = sorted((int(name.split("/")[1]), ms) for name, ms in
+                  gbench_medians_full("Rasterize_Sparse/", reps).items())
+    print("| radius (voxels) | sparse compute | x per doubling |")
+    print("|---|---|---|")
+    prev = None
+    for r, ms in rows:
+        print(f"| {r} | {ms:.1f} ms | {f'{ms / prev:.2f}' if prev else '-'} |")
+        prev = ms
+
+
+def gbench_medians_full(pattern, reps):
+    """Like gbench_medians, keyed by the full run name (with its arguments)."""
+    res = subprocess.run([BENCH, f"--benchmark_filter={pattern}", f"--benchmark_repetitions={reps}",
+                          "--benchmark_format=json"], check=True, capture_output=True, text=True)
+    return {b["run_name"]: b["real_time"]
+            for b in json.loads(res.stdout)["benchmarks"] if b.get("aggregate_name") == "median"}
+
+
+if __name__ == "__main__":
+    main()
