@@ -1,5 +1,6 @@
 #include <ivdb/scene/Scene.h>
 
+#include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
@@ -213,7 +214,7 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
     ObjectReader r(j, path, origin);
     static const std::vector<std::string> kTypes = {
         "sphere", "box", "torus", "quadric", "plane", "cylinder", "ellipsoid", "cone",
-        "paraboloid", "hyperboloid", "union", "intersection", "difference", "transform"};
+        "paraboloid", "hyperboloid", "union", "intersection", "difference", "blend", "transform"};
     const std::string type = r.string("type", kTypes);
     static const std::map<std::string, std::vector<std::string>> kKeys = {
         {"sphere", {"center", "radius"}},
@@ -229,6 +230,7 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
         {"union", {"children"}},
         {"intersection", {"children"}},
         {"difference", {"children"}},
+        {"blend", {"op", "p", "children"}},
         {"transform", {"translate", "rotate_deg", "scale", "child"}}};
     std::vector<std::string> keys = {"type"};
     const auto& own = kKeys.at(type);
@@ -291,6 +293,17 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
                           : type == "intersection" ? implicit::Csg::Op::Intersection
                                                    : implicit::Csg::Op::Difference;
             node = std::make_shared<implicit::Csg>(op, parseChildren(r, 1));
+        } else if (type == "blend") {
+            const std::string op = r.string("op", {"union", "intersection", "difference"});
+            const double sharp = r.number("p");
+            if (!(sharp >= 0.1 && sharp <= 1000.0)) {
+                r.fail(r.childPath("p"), "must be in [0.1, 1000] (larger is sharper; the blend "
+                       "reaches about ln(2)/p from the crease), got " + util::formatNumber(sharp));
+            }
+            const auto kind = op == "union" ? implicit::Csg::Op::Union
+                            : op == "intersection" ? implicit::Csg::Op::Intersection
+                                                   : implicit::Csg::Op::Difference;
+            node = std::make_shared<implicit::Blend>(kind, sharp, parseChildren(r, 2));
         } else if (type == "transform") {
             Vec3d scale(1.0);
             if (r.has("scale")) {

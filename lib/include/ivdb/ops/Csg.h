@@ -1,0 +1,30 @@
+#pragma once
+
+#include <openvdb/openvdb.h>
+
+#include <string>
+#include <vector>
+
+namespace ivdb::ops {
+
+enum class CsgOp { Union, Intersection, Difference };
+
+/// @brief Sharp CSG of narrow-band level sets (seed eqs. 1-3): union = min, intersection = max,
+/// difference = max(A, -B) of the first input with each following one subtracted.
+/// @details Inputs whose transform differs from the finest input's (smallest voxel) are first
+/// resampled onto it (openvdb::tools::resampleToMatch, which rebuilds level sets); each
+/// resampling is described in @a notes. The combination is OpenVDB's csgUnionCopy /
+/// csgIntersectionCopy / csgDifferenceCopy, which works in parallel over the union of the inputs'
+/// topologies, steals whole nodes where only one input has any, and handles inactive regions and
+/// tiles by their sign. The result is a level set named "surface" on the finest transform.
+/// @throw openvdb::ValueError for fewer than two inputs
+openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
+                            std::vector<std::string>* notes = nullptr);
+
+/// @brief @a grid on @a target's transform: a copy if the transforms match, else a resampled
+/// level set (a note is appended to @a notes).
+openvdb::FloatGrid::Ptr matchTransform(const openvdb::FloatGrid& grid,
+                                       const openvdb::math::Transform& target,
+                                       std::vector<std::string>* notes = nullptr);
+
+} // namespace ivdb::ops

@@ -1,0 +1,125 @@
+#include <ivdb/implicit/Blend.h>
+
+#include <openvdb/Exceptions.h>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace ivdb::implicit {
+
+Blend::Blend(Op op, double p, std::vector<Ptr> children)
+    : mOp(op), mP(p), mChildren(std::move(children))
+{
+    if (!(p >= 0.1 && p <= 1000.0)) {
+        std::ostringstream os;
+        os << "blend p must be in [0.1, 1000], got " << p;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+    if (mChildren.empty()) OPENVDB_THROW(openvdb::ValueError, "blend needs children");
+    for (const auto& c : mChildren) {
+        if (!c) OPENVDB_THROW(openvdb::ValueError, "blend has a null child");
+    }
+}
+
+std::string Blend::typeName() const { return "blend"; }
+
+double Blend::combine(const double* t, std::size_t n) const
+{
+    // s = -1 for a union (a soft min), +1 for an intersection or difference (a soft max):
+    // f = s (1/p) ln sum exp(s p t_i) = e + s (1/p) ln sum exp(s p (t_i - e)), e the extreme term,
+    // so every exponent is <= 0 and the largest is exactly 0: no overflow, the sum is >= 1.
+    const double s = mOp == Op::Union ? -1.0 : 1.0;
+    double e = t[0];
+    for (std::size_t i = 1; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
+    double sum = 0.0;
+    for (std::size_t i = 0; i < n; ++i) sum += std::exp(s * mP * (t[i] - e));
+    return e + s * std::log(sum) / mP;
+}
+
+double Blend::value(const Vec3d& p) const
+{
+    double t[64];
+    std::vector<double> big;
+    double* terms = t;
+    if (mChildren.size() > 64) {
+        big.resize(mChildren.size());
+        terms = big.data();
+    }
+    for (std::size_t i = 0; i < mChildren.size(); ++i) {
+        const double v = mChildren[i]->value(p);
+        terms[i] = (mOp == Op::Difference && i > 0) ? -v : v;
+    }
+    return combine(terms, mChildren.size());
+}
+
+Vec3d Blend::gradient(const Vec3d& p) const
+{
+    // d f / d t_i = w_i = exp(s p (t_i - e)) / sum: a convex combination of the terms' gradients.
+    const double s = mOp == Op::Union ? -1.0 : 1.0;
+    std::vector<double> t(mChildren.size());
+    for (std::size_t i = 0; i < mChildren.size(); ++i) {
+        const double v = mChildren[i]->value(p);
+        t[i] = (mOp == Op::Difference && i > 0) ? -v : v;
+    }
+    double e = t[0];
+    for (double v : t) e = s < 0.0 ? std::min(e, v) : std::max(e, v);
+    double sum = 0.0;
+    for (double& v : t) {
+        v = std::exp(s * mP * (v - e));
+        sum += v;
+    }
+    Vec3d g(0.0);
+    for (std::size_t i = 0; i < mChildren.size(); ++i) {
+        const Vec3d gi = mChildren[i]->gradient(p);
+        g += gi * ((mOp == Op::Difference && i > 0) ? -t[i] / sum : t[i] / sum);
+    }
+    return g;
+}
+
+void Blend::values(const double* x, const double* y, const double* z, double* out,
+                   std::size_t n) const
+{
+    // Children into a term-major buffer, then combine per point exactly as value() does.
+    const std::size_t m = mChildren.size();
+    std::vector<double> terms(m * n);
+    for (std::size_t c = 0; c < m; ++c) {
+        double* row = terms.data() + c * n;
+        mChildren[c]->values(x, y, z, row, n);
+        if (mOp == Op::Difference && c > 0) {
+            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
+        }
+    }
+    std::vector<double> t(m);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
+        out[i] = combine(t.data(), m);
+    }
+}
+
+Interval Blend::interval(const BBoxd& box) const
+{
+    const std::size_t m = mChildren.size();
+    std::vector<double> lo(m), hi(m);
+    for (std::size_t c = 0; c < m; ++c) {
+        Interval iv = mChildren[c]->interval(box);
+        if (mOp == Op::Difference && c > 0) iv = -iv;
+        lo[c] = iv.lo;
+        hi[c] = iv.hi;
+    }
+    return {combine(lo.data(), m), combine(hi.data(), m)};
+}
+
+BBoxd Blend::boundingBox() const
+{
+    if (mOp != Op::Union) return Csg(mOp, mChildren).boundingBox();
+    BBoxd b = mChildren[0]->boundingBox();
+    for (const auto& c : mChildren) {
+        if (!c->isExactSdf()) return infiniteBox();
+        b.expand(c->boundingBox());
+    }
+    const double grow = std::log(double(mChildren.size())) / mP;
+    return BBoxd(b.min() - Vec3d(grow), b.max() + Vec3d(grow));
+}
+
+} // namespace ivdb::implicit
