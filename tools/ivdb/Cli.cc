@@ -111,6 +111,7 @@ int run(int argc, char** argv)
         addCurvature(app, action);
         addCompareGradient(app, action);
         addCsg(app, action);
+        addBlend(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {
             const std::string a = argv[i];
@@ -119,7 +120,7 @@ int run(int argc, char** argv)
             const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
             if (subs.empty()) {
                 std::cerr << "ivdb: error: unknown command '" << a
-                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg (run 'ivdb --help')" << std::endl;
+                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend (run 'ivdb --help')" << std::endl;
                 return 2;
             }
             break;

@@ -30,6 +30,7 @@ void addGradient(CLI::App& app, Action& action);
 void addCurvature(CLI::App& app, Action& action);
 void addCompareGradient(CLI::App& app, Action& action);
 void addCsg(CLI::App& app, Action& action);
+void addBlend(CLI::App& app, Action& action);
 /// @}
 
 /// @brief Rasterizer settings from a scene and the command line's --voxel-size and --half-width.

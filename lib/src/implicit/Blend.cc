@@ -24,17 +24,17 @@ Blend::Blend(Op op, double p, std::vector<Ptr> children)
 
 std::string Blend::typeName() const { return "blend"; }
 
-double Blend::combine(const double* t, std::size_t n) const
+double blendTerms(Csg::Op op, double p, const double* t, std::size_t n)
 {
     // s = -1 for a union (a soft min), +1 for an intersection or difference (a soft max):
     // f = s (1/p) ln sum exp(s p t_i) = e + s (1/p) ln sum exp(s p (t_i - e)), e the extreme term,
     // so every exponent is <= 0 and the largest is exactly 0: no overflow, the sum is >= 1.
-    const double s = mOp == Op::Union ? -1.0 : 1.0;
+    const double s = op == Csg::Op::Union ? -1.0 : 1.0;
     double e = t[0];
     for (std::size_t i = 1; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
     double sum = 0.0;
-    for (std::size_t i = 0; i < n; ++i) sum += std::exp(s * mP * (t[i] - e));
-    return e + s * std::log(sum) / mP;
+    for (std::size_t i = 0; i < n; ++i) sum += std::exp(s * p * (t[i] - e));
+    return e + s * std::log(sum) / p;
 }
 
 double Blend::value(const Vec3d& p) const

@@ -1,7 +1,12 @@
 #include <ivdb/ops/Csg.h>
 
+#include <openvdb/tools/ChangeBackground.h>
 #include <openvdb/tools/Composite.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tools/GridTransformer.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <cmath>
 
 #include <sstream>
 
@@ -25,6 +30,30 @@ openvdb::FloatGrid::Ptr matchTransform(const openvdb::FloatGrid& grid,
     return out;
 }
 
+namespace {
+
+/// Give a level set the narrow band of half width @a bg (world units): active voxels with
+/// |d| >= bg become inactive, and every inactive value becomes +/- bg by its sign. Inputs with
+/// different bands (a coarser grid resampled, or another half width) would otherwise mix their
+/// backgrounds in the result, and which one a region gets would depend on the order of the
+/// inputs and on thread timing.
+void normalizeBand(openvdb::FloatGrid& grid, float bg)
+{
+    if (grid.background() == bg) return;
+    openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree());
+    leaves.foreach([bg](openvdb::FloatTree::LeafNodeType& leaf, size_t) {
+        float* buf = leaf.buffer().data();
+        for (openvdb::Index n = 0; n < leaf.SIZE; ++n) {
+            if (leaf.isValueOn(n) && std::abs(buf[n]) < bg) continue;
+            leaf.setValueOff(n, buf[n] > 0.0f ? bg : -bg);
+        }
+    });
+    openvdb::tools::changeLevelSetBackground(grid.tree(), bg);
+    openvdb::tools::pruneLevelSet(grid.tree());
+}
+
+} // namespace
+
 openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
                             std::vector<std::string>* notes)
 {
@@ -37,9 +66,12 @@ openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::Cons
         if (inputs[i]->voxelSize()[0] < inputs[finest]->voxelSize()[0]) finest = i;
     }
     const openvdb::math::Transform& target = inputs[finest]->transform();
+    const float bg = inputs[finest]->background();
     openvdb::FloatGrid::Ptr result = matchTransform(*inputs[0], target, notes);
+    normalizeBand(*result, bg);
     for (size_t i = 1; i < inputs.size(); ++i) {
         const openvdb::FloatGrid::Ptr next = matchTransform(*inputs[i], target, notes);
+        normalizeBand(*next, bg);
         switch (op) {
         case CsgOp::Union: result = openvdb::tools::csgUnionCopy(*result, *next); break;
         case CsgOp::Intersection: result = openvdb::tools::csgIntersectionCopy(*result, *next); break;

@@ -2,11 +2,9 @@
 
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
+#include <ivdb/levelset/Redistance.h>
 #include <ivdb/util/System.h>
 
-#include <openvdb/tools/ChangeBackground.h>
-#include <openvdb/tools/FastSweeping.h>
-#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/LeafManager.h>
@@ -155,7 +153,7 @@ LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, boo
             return nullptr;
         }
     } else {
-        // Every voxel of a candidate leaf takes part in re-distancing (see finishBand).
+        // Every voxel of a candidate leaf takes part in re-distancing (levelset::redistance).
         for (int n = 0; n < 512; ++n) {
             buf[n] = ctx.estimate(f, v[n], Vec3d(x[n], y[n], z[n]));
         }
@@ -426,78 +424,6 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
     return grid;
 }
 
-/// Non-exact shapes: keep the voxels within sweepSteps of the interface, re-distance them by
-/// fast sweeping (OpenVDB's sdfToSdf) and trim to the band. Only voxel signs and the estimates
-/// next to the interface matter, which both sampling paths compute identically.
-openvdb::FloatGrid::Ptr finishBand(const Context& ctx, openvdb::FloatGrid& samples)
-{
-    using MaskTree = openvdb::MaskTree;
-    FloatTree& tree = samples.tree();
-    MaskTree interface(tree, false, openvdb::TopologyCopy());
-    {
-        openvdb::tree::LeafManager<MaskTree> masks(interface);
-        masks.foreach([&](MaskTree::LeafNodeType& mleaf, size_t) {
-            openvdb::tree::ValueAccessor<const FloatTree> acc(tree);
-            const LeafT* leaf = acc.probeConstLeaf(mleaf.origin());
-            mleaf.setValuesOff();
-            if (!leaf) return;
-            for (auto it = leaf->cbeginValueOn(); it; ++it) {
-                const Coord ijk = it.getCoord();
-                const bool s = *it > 0.0f;
-                static const Coord kFaces[6] = {Coord(1, 0, 0), Coord(-1, 0, 0), Coord(0, 1, 0),
-                                                Coord(0, -1, 0), Coord(0, 0, 1), Coord(0, 0, -1)};
-                for (const Coord& d : kFaces) {
-                    if ((acc.getValue(ijk + d) > 0.0f) != s) {
-                        mleaf.setValueOn(it.pos());
-                        break;
-                    }
-                }
-            }
-        });
-    }
-    if (ctx.interrupted()) throwInterrupted();
-    openvdb::tools::dilateActiveValues(interface, ctx.sweepSteps,
-                                       openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                       openvdb::tools::IGNORE_TILES);
-    tree.topologyIntersection(interface);
-    if (tree.activeVoxelCount() == 0) return samples.copy(); // no surface: an empty band
-
-    // OpenVDB's sdfToSdf, with one change: the voxels next to the interface (the boundary
-    // condition) keep our estimate f / |grad f| from the analytic function instead of
-    // FastSweeping's axis-crossing formula, which is off by up to 0.3 voxel on curved surfaces.
-    openvdb::tools::FastSweeping<openvdb::FloatGrid> sweeper;
-    if (!sweeper.initSdf(samples, 0.0f, /*isInputSdf=*/true)) return samples.copy();
-    openvdb::FloatGrid::Ptr out = sweeper.sdfGrid();
-    {
-        const float frozen = 0.5f * std::numeric_limits<float>::max();
-        openvdb::tree::LeafManager<FloatTree> leaves(out->tree());
-        leaves.foreach([&](LeafT& leaf, size_t) {
-            const LeafT* src = samples.tree().probeConstLeaf(leaf.origin());
-            if (!src) return;
-            float* buf = leaf.buffer().data();
-            for (auto it = leaf.beginValueOn(); it; ++it) {
-                if (std::abs(*it) < frozen) buf[it.pos()] = src->getValue(it.pos());
-            }
-        });
-    }
-    if (sweeper.sweepingVoxelCount() > 0) sweeper.sweep(1);
-    out = sweeper.sdfGrid();
-    if (ctx.interrupted()) throwInterrupted();
-
-    const float bg = static_cast<float>(ctx.band);
-    openvdb::tree::LeafManager<FloatTree> leaves(out->tree());
-    leaves.foreach([&](LeafT& leaf, size_t) {
-        float* buf = leaf.buffer().data();
-        for (int n = 0; n < 512; ++n) {
-            const float v = buf[n];
-            if (leaf.isValueOn(n) && ctx.inBand(v)) continue;
-            leaf.setValueOff(n, v > 0.0f ? bg : -bg);
-        }
-    });
-    openvdb::tools::changeLevelSetBackground(out->tree(), bg);
-    return out;
-}
-
 } // namespace
 
 Implicit::Ptr clipToBounds(const Implicit::Ptr& shape, const RasterSettings& settings)
@@ -612,7 +538,7 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
         openvdb::FloatGrid::Ptr grid = settings.sampling == Sampling::Dense
                                            ? sampleDense(ctx)
                                            : sampleSparse(ctx);
-        if (!ctx.exact) grid = finishBand(ctx, *grid);
+        if (!ctx.exact) grid = levelset::redistance(*grid, ctx.halfWidthVox, ctx.interrupter);
         openvdb::tools::pruneLevelSet(grid->tree());
         if (ctx.interrupter) ctx.interrupter->end();
         return grid;

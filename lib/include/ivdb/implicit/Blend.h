@@ -6,6 +6,11 @@
 
 namespace ivdb::implicit {
 
+/// @brief The blended value of the signed terms @a t (children's values, negated for the ones a
+/// difference subtracts): union -(1/p) ln sum exp(-p t_i), intersection and difference
+/// (1/p) ln sum exp(p t_i), evaluated around the extreme term so that nothing overflows.
+double blendTerms(Csg::Op op, double p, const double* t, std::size_t n);
+
 /// @brief Super-elliptic blended CSG (seed eqs. 12-15) over any number of children.
 /// @details With the density D = exp(-f): union f = -(1/p) ln(sum exp(-p f_i)); intersection the
 /// same with -p; difference = intersection of the first child with the others negated. Computed as
@@ -39,9 +44,7 @@ public:
     double sharpness() const { return mP; }
 
 private:
-    /// The blended value of the signed terms t_i (children, negated for a difference's
-    /// subtracted ones): union -(1/p) lse(-p t), intersection (1/p) lse(p t).
-    double combine(const double* terms, std::size_t n) const;
+    double combine(const double* terms, std::size_t n) const { return blendTerms(mOp, mP, terms, n); }
 
     Op mOp;
     double mP;

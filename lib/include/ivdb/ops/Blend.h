@@ -1,0 +1,41 @@
+#pragma once
+
+#include <ivdb/ops/Csg.h>
+
+#include <openvdb/util/NullInterrupter.h>
+
+#include <cstdint>
+
+namespace ivdb::ops {
+
+struct BlendSettings
+{
+    /// Sharpness p in [0.1, 1000] (1/world units): the blend reaches about ln(2)/p from the crease.
+    double p = 10.0;
+    /// Error allowed on the blended surface from the bands' limited reach, in voxels.
+    double tolerance = 0.05;
+    /// Memory the band extension may use, in bytes; 0 means 80% of the available memory.
+    std::uint64_t memoryLimit = 0;
+    openvdb::util::NullInterrupter* interrupter = nullptr;
+};
+
+/// @brief How far (world units) each input's band must reach beyond the output band for the
+/// blend to be within @a toleranceWorld of the exact one: ln(1 / (p tolerance)) / p, since a
+/// term d beyond the others contributes at most exp(-p d) / p.
+double blendReach(double p, double toleranceWorld);
+
+/// @brief Super-elliptic blended CSG of level sets (seed eqs. 12-15) on grids.
+/// @details Inputs are resampled onto the finest one (as csg()). Each input's narrow band is
+/// first extended by fast sweeping (openvdb::tools::dilateSdf) as far as blendReach() asks, so
+/// the blend does not read clamped background values near the other surface; the values are
+/// combined over the union of the extended topologies with the same log-sum-exp as the
+/// scene-level blend, estimated as distances f / |grad f| and re-distanced into a narrow band of
+/// the first input's half width (levelset::redistance).
+/// @throw openvdb::ValueError for a bad p or fewer than two inputs
+/// @throw openvdb::RuntimeError if the extension would not fit in memory (the message suggests
+/// the scene-level blend), or on interruption
+openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
+                              const BlendSettings& settings,
+                              std::vector<std::string>* notes = nullptr);
+
+} // namespace ivdb::ops

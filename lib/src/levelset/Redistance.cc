@@ -1,0 +1,113 @@
+#include <ivdb/levelset/Redistance.h>
+
+#include <openvdb/tools/ChangeBackground.h>
+#include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Morphology.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <cmath>
+#include <limits>
+
+namespace ivdb::levelset {
+
+namespace {
+
+using FloatTree = openvdb::FloatTree;
+using LeafT = FloatTree::LeafNodeType;
+using openvdb::Coord;
+
+void checkInterrupt(openvdb::util::NullInterrupter* interrupter)
+{
+    if (interrupter && interrupter->wasInterrupted()) {
+        OPENVDB_THROW(openvdb::RuntimeError, "interrupted");
+    }
+}
+
+} // namespace
+
+openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& samples, double halfWidth,
+                                   openvdb::util::NullInterrupter* interrupter,
+                                   double keepEstimates, double agreement)
+{
+    using MaskTree = openvdb::MaskTree;
+    const float bg = static_cast<float>(halfWidth * samples.voxelSize()[0]);
+    const int sweepSteps = int(std::ceil(halfWidth));
+    auto inBand = [bg](float v) { return std::abs(v) < bg; };
+
+    // Voxels next to a sign change (a face neighbour on the other side of zero).
+    FloatTree& tree = samples.tree();
+    MaskTree interface(tree, false, openvdb::TopologyCopy());
+    {
+        openvdb::tree::LeafManager<MaskTree> masks(interface);
+        masks.foreach([&](MaskTree::LeafNodeType& mleaf, size_t) {
+            openvdb::tree::ValueAccessor<const FloatTree> acc(tree);
+            const LeafT* leaf = acc.probeConstLeaf(mleaf.origin());
+            mleaf.setValuesOff();
+            if (!leaf) return;
+            static const Coord kFaces[6] = {Coord(1, 0, 0), Coord(-1, 0, 0), Coord(0, 1, 0),
+                                            Coord(0, -1, 0), Coord(0, 0, 1), Coord(0, 0, -1)};
+            for (auto it = leaf->cbeginValueOn(); it; ++it) {
+                const Coord ijk = it.getCoord();
+                const bool s = *it > 0.0f;
+                for (const Coord& d : kFaces) {
+                    if ((acc.getValue(ijk + d) > 0.0f) != s) {
+                        mleaf.setValueOn(it.pos());
+                        break;
+                    }
+                }
+            }
+        });
+    }
+    checkInterrupt(interrupter);
+    openvdb::tools::dilateActiveValues(interface, sweepSteps, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
+    tree.topologyIntersection(interface);
+    if (tree.activeVoxelCount() == 0) return samples.copy(); // no surface: an empty band
+
+    // OpenVDB's sdfToSdf, with the voxels next to the interface (the boundary condition) keeping
+    // their own estimates.
+    openvdb::tools::FastSweeping<openvdb::FloatGrid> sweeper;
+    if (!sweeper.initSdf(samples, 0.0f, /*isInputSdf=*/true)) return samples.copy();
+    openvdb::FloatGrid::Ptr out = sweeper.sdfGrid();
+    {
+        const float frozen = 0.5f * std::numeric_limits<float>::max();
+        openvdb::tree::LeafManager<FloatTree> leaves(out->tree());
+        leaves.foreach([&](LeafT& leaf, size_t) {
+            const LeafT* src = samples.tree().probeConstLeaf(leaf.origin());
+            if (!src) return;
+            float* buf = leaf.buffer().data();
+            for (auto it = leaf.beginValueOn(); it; ++it) {
+                if (std::abs(*it) < frozen) buf[it.pos()] = src->getValue(it.pos());
+            }
+        });
+    }
+    if (sweeper.sweepingVoxelCount() > 0) sweeper.sweep(1);
+    out = sweeper.sdfGrid();
+    checkInterrupt(interrupter);
+
+    // Trim to the band: |d| < background, everything else +/- background by sign. Near the
+    // surface, keep the smooth estimates where they agree with the sweep.
+    const double dx = samples.voxelSize()[0];
+    const float keep = float(std::min(keepEstimates, halfWidth) * dx);
+    const float agree = float(agreement * dx);
+    openvdb::tree::LeafManager<FloatTree> leaves(out->tree());
+    leaves.foreach([&](LeafT& leaf, size_t) {
+        const LeafT* est = samples.tree().probeConstLeaf(leaf.origin());
+        float* buf = leaf.buffer().data();
+        for (int n = 0; n < 512; ++n) {
+            const float v = buf[n];
+            if (leaf.isValueOn(n) && inBand(v)) {
+                if (est && std::abs(v) < keep) {
+                    const float e = est->getValue(n);
+                    if (std::abs(e - v) <= agree && (e > 0.0f) == (v > 0.0f) && inBand(e)) buf[n] = e;
+                }
+                continue;
+            }
+            leaf.setValueOff(n, v > 0.0f ? bg : -bg);
+        }
+    });
+    openvdb::tools::changeLevelSetBackground(out->tree(), bg);
+    return out;
+}
+
+} // namespace ivdb::levelset
