@@ -1,11 +1,22 @@
 #!/usr/bin/env bash
 # README command 1: install what is missing, build in Release, and run the main job:
-# rasterize every scene in data/ into out/NAME.vdb, one summary line per scene.
+# rasterize every scene in data/ into out/NAME.vdb (one summary line per scene), then the grid
+# pipelines: the seed's figure 1 trio as grid CSG of two rasterized spheres, a grid blend, and
+# the gradient and mean curvature of figure 4's difference of two spheres.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
 scripts/build.sh
+ivdb=build/bin/ivdb
 mkdir -p out
 for scene in data/*.json; do
-  build/bin/ivdb rasterize "$scene" -o "out/$(basename "$scene" .json).vdb"
+  "$ivdb" rasterize "$scene" -o "out/$(basename "$scene" .json).vdb"
 done
+"$ivdb" rasterize data/inputs/sphere_left.json -o out/sphere_left.vdb -q
+"$ivdb" rasterize data/inputs/sphere_right.json -o out/sphere_right.vdb -q
+for op in union intersection difference; do
+  "$ivdb" csg "$op" out/sphere_left.vdb out/sphere_right.vdb -o "out/grid_fig1_$op.vdb"
+done
+"$ivdb" blend union out/sphere_left.vdb out/sphere_right.vdb -p 50 -o out/grid_blend_union_p50.vdb
+"$ivdb" gradient out/fig1_difference.vdb -o out/fig1_difference_gradient.vdb --magnitude --with-input
+"$ivdb" curvature out/fig1_difference.vdb -o out/fig1_difference_curvature.vdb --with-input

@@ -203,12 +203,12 @@ raster::RasterSettings settings(double dx)
     return r;
 }
 
-/// Exactly the same active voxels and values, and the same inactive values.
+/// Exactly the same active voxels and values, and the same inactive values. (The node structure
+/// may differ: in-place CSG steals and prunes nodes that the copying variants duplicate.)
 void expectIdentical(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b,
                      const std::string& what)
 {
     EXPECT_EQ(a.activeVoxelCount(), b.activeVoxelCount()) << what;
-    EXPECT_TRUE(a.tree().hasSameTopology(b.tree())) << what;
     EXPECT_EQ(a.background(), b.background()) << what;
     EXPECT_EQ(a.transform(), b.transform()) << what;
     auto acc = b.getConstAccessor();

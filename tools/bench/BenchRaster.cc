@@ -4,12 +4,15 @@
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/ops/Blend.h>
+#include <ivdb/ops/Csg.h>
 #include <ivdb/raster/Rasterize.h>
 #include <ivdb/util/System.h>
 
 #include <ivdb/diff/Differential.h>
 
 #include <openvdb/io/File.h>
+#include <openvdb/tools/Composite.h>
 #include <openvdb/tools/GridOperators.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
@@ -158,8 +161,58 @@ void BM_OpenVDB_MeanCurvature(benchmark::State& state)
     for (auto _ : state) benchmark::DoNotOptimize(openvdb::tools::meanCurvature(*phi).get());
 }
 
+// Two overlapping spheres of radius r voxels (centres +/- 0.35 of the radius apart).
+std::pair<openvdb::FloatGrid::Ptr, openvdb::FloatGrid::Ptr> benchPair(int r)
+{
+    static std::map<int, std::pair<openvdb::FloatGrid::Ptr, openvdb::FloatGrid::Ptr>> cache;
+    auto& p = cache[r];
+    if (!p.first) {
+        p.first = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+            1.0f, openvdb::Vec3f(-0.35f, 0.0f, 0.0f), 1.0f / float(r), 3.0f);
+        p.second = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+            1.0f, openvdb::Vec3f(0.35f, 0.0f, 0.0f), 1.0f / float(r), 3.0f);
+    }
+    return p;
+}
+
+void BM_CsgUnion(benchmark::State& state)
+{
+    // In place, as `ivdb csg` runs it; the copies of the inputs are not timed (as below).
+    auto [a, b] = benchPair(int(state.range(0)));
+    for (auto _ : state) {
+        state.PauseTiming();
+        std::vector<openvdb::FloatGrid::Ptr> in{a->deepCopy(), b->deepCopy()};
+        state.ResumeTiming();
+        benchmark::DoNotOptimize(ops::csgInPlace(ops::CsgOp::Union, in).get());
+    }
+}
+
+void BM_OpenVDB_CsgUnion(benchmark::State& state)
+{
+    auto [a, b] = benchPair(int(state.range(0)));
+    for (auto _ : state) {
+        state.PauseTiming();
+        auto ca = a->deepCopy();
+        auto cb = b->deepCopy();
+        state.ResumeTiming();
+        openvdb::tools::csgUnion(*ca, *cb);
+        benchmark::DoNotOptimize(ca.get());
+    }
+}
+
+void BM_BlendUnion_p1000(benchmark::State& state)
+{
+    auto [a, b] = benchPair(int(state.range(0)));
+    ops::BlendSettings s;
+    s.p = 1000.0 * 100.0 / double(state.range(0)); // the same reach in voxels at every size
+    for (auto _ : state) benchmark::DoNotOptimize(ops::blend(ops::CsgOp::Union, {a, b}, s).get());
+}
+
 } // namespace
 
+BENCHMARK(BM_CsgUnion)->Arg(100)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_OpenVDB_CsgUnion)->Arg(100)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_BlendUnion_p1000)->Arg(100)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Gradient)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OpenVDB_Gradient)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_MeanCurvature)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();

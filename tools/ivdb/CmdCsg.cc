@@ -28,18 +28,18 @@ int runCsg(const CsgOptions& opt)
                                  std::to_string(opt.inputs.size()));
     }
     io::checkOutputPath(opt.output);
-    std::vector<openvdb::FloatGrid::ConstPtr> grids;
+    std::vector<openvdb::FloatGrid::Ptr> grids;
     for (const std::string& path : opt.inputs) {
         const openvdb::GridBase::Ptr g = io::selectGrid(io::readVdb(path), path, opt.grid);
         diff::checkLevelSet(*g, path + ": grid '" + g->getName() + "'");
-        grids.push_back(openvdb::gridConstPtrCast<openvdb::FloatGrid>(g));
+        grids.push_back(openvdb::gridPtrCast<openvdb::FloatGrid>(g));
     }
     const auto t1 = std::chrono::steady_clock::now();
     const ops::CsgOp op = opt.op == "union" ? ops::CsgOp::Union
                         : opt.op == "intersection" ? ops::CsgOp::Intersection
                                                    : ops::CsgOp::Difference;
     std::vector<std::string> notes;
-    auto result = ops::csg(op, grids, &notes);
+    auto result = ops::csgInPlace(op, grids, &notes); // the inputs are not needed afterwards
     for (const auto& n : notes) std::fprintf(stderr, "ivdb: note: %s\n", n.c_str());
     const auto t2 = std::chrono::steady_clock::now();
     std::string sources;

@@ -54,8 +54,8 @@ void normalizeBand(openvdb::FloatGrid& grid, float bg)
 
 } // namespace
 
-openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
-                            std::vector<std::string>* notes)
+openvdb::FloatGrid::Ptr csgInPlace(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& inputs,
+                                   std::vector<std::string>* notes)
 {
     if (inputs.size() < 2) {
         OPENVDB_THROW(openvdb::ValueError, "CSG needs at least two level sets, got " +
@@ -65,23 +65,36 @@ openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::Cons
     for (size_t i = 1; i < inputs.size(); ++i) {
         if (inputs[i]->voxelSize()[0] < inputs[finest]->voxelSize()[0]) finest = i;
     }
-    const openvdb::math::Transform& target = inputs[finest]->transform();
+    const openvdb::math::Transform::Ptr target = inputs[finest]->transform().copy();
     const float bg = inputs[finest]->background();
-    openvdb::FloatGrid::Ptr result = matchTransform(*inputs[0], target, notes);
-    normalizeBand(*result, bg);
+    // Inputs already on the target with its band are used as they are.
+    auto prepare = [&](const openvdb::FloatGrid::Ptr& in) -> openvdb::FloatGrid::Ptr {
+        if (in->transform() == *target && in->background() == bg) return in;
+        openvdb::FloatGrid::Ptr g = matchTransform(*in, *target, notes);
+        normalizeBand(*g, bg);
+        return g;
+    };
+    openvdb::FloatGrid::Ptr result = prepare(inputs[0]);
     for (size_t i = 1; i < inputs.size(); ++i) {
-        const openvdb::FloatGrid::Ptr next = matchTransform(*inputs[i], target, notes);
-        normalizeBand(*next, bg);
+        const openvdb::FloatGrid::Ptr next = prepare(inputs[i]);
         switch (op) {
-        case CsgOp::Union: result = openvdb::tools::csgUnionCopy(*result, *next); break;
-        case CsgOp::Intersection: result = openvdb::tools::csgIntersectionCopy(*result, *next); break;
-        case CsgOp::Difference: result = openvdb::tools::csgDifferenceCopy(*result, *next); break;
+        case CsgOp::Union: openvdb::tools::csgUnion(*result, *next); break;
+        case CsgOp::Intersection: openvdb::tools::csgIntersection(*result, *next); break;
+        case CsgOp::Difference: openvdb::tools::csgDifference(*result, *next); break;
         }
     }
-    result->setTransform(target.copy());
+    result->setTransform(target);
     result->setGridClass(openvdb::GRID_LEVEL_SET);
     result->setName("surface");
     return result;
+}
+
+openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
+                            std::vector<std::string>* notes)
+{
+    std::vector<openvdb::FloatGrid::Ptr> copies;
+    for (const auto& in : inputs) copies.push_back(in->deepCopy());
+    return csgInPlace(op, copies, notes);
 }
 
 } // namespace ivdb::ops

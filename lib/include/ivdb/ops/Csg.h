@@ -14,13 +14,19 @@ enum class CsgOp { Union, Intersection, Difference };
 /// @details Inputs whose transform differs from the finest input's (smallest voxel) are first
 /// resampled onto it (openvdb::tools::resampleToMatch, which rebuilds level sets); each
 /// resampling is described in @a notes. Every input then gets the finest input's band (half
-/// width), so the result has one background. The combination is OpenVDB's csgUnionCopy /
-/// csgIntersectionCopy / csgDifferenceCopy, which works in parallel over the union of the inputs'
+/// width), so the result has one background. The combination is OpenVDB's csgUnion /
+/// csgIntersection / csgDifference (on copies of the inputs), which works in parallel over the union of the inputs'
 /// topologies, steals whole nodes where only one input has any, and handles inactive regions and
 /// tiles by their sign. The result is a level set named "surface" on the finest transform.
 /// @throw openvdb::ValueError for fewer than two inputs
 openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
                             std::vector<std::string>* notes = nullptr);
+
+/// @brief csg() that consumes its inputs: OpenVDB's in-place csgUnion / csgIntersection /
+/// csgDifference steal their nodes (no copies), so the inputs are left empty or changed.
+/// For callers that do not need the inputs afterwards (the CLI).
+openvdb::FloatGrid::Ptr csgInPlace(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& inputs,
+                                   std::vector<std::string>* notes = nullptr);
 
 /// @brief @a grid on @a target's transform: a copy if the transforms match, else a resampled
 /// level set (a note is appended to @a notes).
