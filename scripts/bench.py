@@ -8,10 +8,14 @@ Measures, in one run and interleaved so machine noise hits both sides alike:
     build/bin/ivdb_bench, median of repetitions);
   * end to end: `ivdb rasterize` vs `vdb_tool -sphere ... -write` (start, compute, write);
   * sparse vs dense: wall time and peak memory of `ivdb rasterize` at several resolutions.
+Section "csg" (two overlapping radius-400 spheres):
+  * combine step: ops::csgInPlace vs openvdb::tools::csgUnion (Google Benchmark);
+  * end to end: `ivdb csg union A B` vs `vdb_tool -read A B -union -write`;
+  * blend vs sharp (radius 100, p chosen so the band extension is 2 voxels).
 Section "diff" (gradient and mean curvature of the radius-400 sphere):
   * compute: diff::gradient / diff::curvature vs openvdb::tools::gradient / meanCurvature;
   * end to end: `ivdb gradient|curvature IN -o OUT` vs `vdb_tool -read IN -grad|-curvature -write OUT`.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|diff|all] [--reps N] [--quick]
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|all] [--reps N] [--quick]
 """
 import argparse
 import json
@@ -65,13 +69,15 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
-    ap.add_argument("--section", choices=["core", "diff", "all"], default="all")
+    ap.add_argument("--section", choices=["core", "csg", "diff", "all"], default="all")
     args = ap.parse_args()
     reps = 3 if args.quick else args.reps
     big = 200 if args.quick else 400
 
     with tempfile.TemporaryDirectory() as tmp:
         print(f"# ivdb benchmark ({os.cpu_count()} cores), medians of {reps} runs\n")
+        if args.section in ("csg", "all"):
+            bench_csg(tmp, big, reps)
         if args.section in ("diff", "all"):
             bench_diff(tmp, big, reps)
         if args.section in ("core", "all"):
@@ -83,6 +89,34 @@ def gbench_medians(pattern, reps):
                           "--benchmark_format=json"], check=True, capture_output=True, text=True)
     return {b["run_name"].split("/")[0]: b["real_time"]
             for b in json.loads(res.stdout)["benchmarks"] if b.get("aggregate_name") == "median"}
+
+
+def bench_csg(tmp, big, reps):
+    med = gbench_medians_full("(CsgUnion|BlendUnion)", reps)
+    ours, ref = med[f"BM_CsgUnion/{big}/real_time"], med[f"BM_OpenVDB_CsgUnion/{big}/real_time"]
+    sharp100, blend100 = med["BM_CsgUnion/100/real_time"], med["BM_BlendUnion_p1000/100/real_time"]
+    print("| compute only (Google Benchmark), two spheres | ivdb | OpenVDB / sharp | ratio |")
+    print("|---|---|---|---|")
+    print(f"| csg union (radius {big}) vs tools::csgUnion | {ours:.1f} ms | {ref:.1f} ms | "
+          f"**{ours / ref:.2f}x the time** |")
+    print(f"| blend union, 2-voxel band extension (radius 100) vs sharp csg union | {blend100:.0f} ms | "
+          f"{sharp100:.1f} ms | **{blend100 / sharp100:.0f}x the time** |\n")
+    a, b = os.path.join(tmp, "a.vdb"), os.path.join(tmp, "b.vdb")
+    for path, cx in ((a, -0.35), (b, 0.35)):
+        scene = os.path.join(tmp, "s.json")
+        with open(scene, "w") as f:
+            json.dump({"voxel_size": 1.0 / big, "shape": {"type": "sphere", "center": [cx, 0, 0],
+                                                          "radius": 1}}, f)
+        run([IVDB, "rasterize", scene, "-o", path, "-q"])
+    out_a, out_b = os.path.join(tmp, "ua.vdb"), os.path.join(tmp, "ub.vdb")
+    t, m = median_runs({
+        "ivdb": [IVDB, "csg", "union", a, b, "-o", out_a, "-q"],
+        "vdb_tool": ["vdb_tool", "-read", a, b, "-union", "-write", out_b],
+    }, reps)
+    print("| end to end, union of two radius-%d spheres | ivdb csg union | vdb_tool -union | ivdb is |" % big)
+    print("|---|---|---|---|")
+    print(f"| wall time | {t['ivdb']:.2f} s | {t['vdb_tool']:.2f} s | **{t['vdb_tool'] / t['ivdb']:.2f}x faster** |")
+    print(f"| peak memory | {m['ivdb']:.0f} MB | {m['vdb_tool']:.0f} MB | {m['vdb_tool'] / m['ivdb']:.2f}x less |\n")
 
 
 def bench_diff(tmp, big, reps):

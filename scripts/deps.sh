@@ -4,7 +4,7 @@ set -euo pipefail
 
 packages=(
   cmake g++ ccache make pkg-config
-  libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev
+  libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev zlib1g-dev libimath-dev
   libcli11-dev nlohmann-json3-dev
   libgtest-dev libbenchmark-dev
   libopenvdb-tools python3-openvdb python3-numpy
@@ -20,7 +20,13 @@ done
 if [ ${#missing[@]} -gt 0 ]; then
   echo "ivdb set-up: installing ${missing[*]}" >&2
   sudo_cmd=()
-  if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
+  if [ "$(id -u)" -ne 0 ]; then
+    if ! command -v sudo >/dev/null; then
+      echo "ivdb set-up: missing packages ${missing[*]}; run as root or install sudo" >&2
+      exit 1
+    fi
+    sudo_cmd=(sudo)
+  fi
   "${sudo_cmd[@]}" apt-get update -qq
   DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi

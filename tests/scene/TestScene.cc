@@ -439,7 +439,9 @@ TEST_F(TestScene, BadVoxelSizeAndHalfWidth)
     msg = errorOf("{\"voxel_size\": -0.5, " + shape + "}");
     expectMentions(msg, {"scene.json", "voxel_size", "-0.5"});
     msg = errorOf("{\"half_width\": 0.5, " + shape + "}");
-    expectMentions(msg, {"scene.json", "half_width", ">= 1", "0.5"});
+    expectMentions(msg, {"scene.json", "half_width", "[1, 1000]", "0.5"});
+    msg = errorOf("{\"half_width\": 3e9, " + shape + "}");
+    expectMentions(msg, {"scene.json", "half_width", "[1, 1000]", "3e+09"});
     msg = errorOf("{\"half_width\": -2, " + shape + "}");
     expectMentions(msg, {"scene.json", "half_width", "-2"});
 }

@@ -24,13 +24,16 @@ std::atomic<bool> gInterrupted{false};
 
 extern "C" void onSigint(int)
 {
+    // The first Ctrl-C asks the running operation to stop; a second one kills the process.
     gInterrupted = true;
+    std::signal(SIGINT, SIG_DFL);
 }
 
 } // namespace
 
 Progress::Progress(std::string label): mLabel(std::move(label)), mTerminal(::isatty(2) == 1)
 {
+    gInterrupted = false;
     std::signal(SIGINT, onSigint);
 }
 
@@ -52,8 +55,9 @@ void Progress::end()
 
 bool Progress::wasInterrupted(int percent)
 {
-    if (mTerminal && percent >= 0 && percent != mLastPercent) {
-        mLastPercent = percent;
+    int last = mLastPercent.load();
+    // Only the thread that moves the percentage forward prints it.
+    if (mTerminal && percent > last && mLastPercent.compare_exchange_strong(last, percent)) {
         std::fprintf(stderr, "\r%s: %3d%%", mLabel.c_str(), percent);
         std::fflush(stderr);
     }
@@ -79,8 +83,9 @@ raster::RasterSettings sceneSettings(const scene::Scene& sc, const std::string& 
     }
     settings.halfWidth = sc.halfWidth;
     if (halfWidth) {
-        if (!(*halfWidth >= 1.0) || !std::isfinite(*halfWidth)) {
-            throw std::runtime_error("--half-width must be >= 1 voxel and finite, got " +
+        if (!(*halfWidth >= 1.0 && *halfWidth <= raster::kMaxHalfWidth)) {
+            throw std::runtime_error("--half-width must be in [1, " +
+                                     util::formatNumber(raster::kMaxHalfWidth) + "] voxels, got " +
                                      util::formatNumber(*halfWidth));
         }
         settings.halfWidth = *halfWidth;

@@ -7,6 +7,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <atomic>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -52,7 +53,7 @@ public:
 private:
     std::string mLabel;
     bool mTerminal;
-    int mLastPercent = -1;
+    std::atomic<int> mLastPercent{-1}; // called from TBB workers at once
 };
 
 /// @brief Print a warning line `ivdb: warning: <what>` on stderr.

@@ -31,7 +31,10 @@ nlohmann::json toJson(const diff::ErrorStats& s)
 int runCompare(const CompareOptions& opt)
 {
     for (int k : opt.steps) {
-        if (k < 1) throw std::runtime_error("--step must be >= 1 voxel, got " + std::to_string(k));
+        if (k < 1 || k > diff::kMaxStep) {
+            throw std::runtime_error("--step must be in [1, " + std::to_string(diff::kMaxStep) +
+                                     "] voxels, got " + std::to_string(k));
+        }
     }
     const scene::Scene sc = scene::loadScene(opt.scene);
     raster::RasterSettings settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);

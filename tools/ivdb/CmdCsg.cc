@@ -41,6 +41,10 @@ int runCsg(const CsgOptions& opt)
     std::vector<std::string> notes;
     auto result = ops::csgInPlace(op, grids, &notes); // the inputs are not needed afterwards
     for (const auto& n : notes) std::fprintf(stderr, "ivdb: note: %s\n", n.c_str());
+    if (result->activeVoxelCount() == 0) {
+        warn("the result has no surface (the inputs do not overlap as this operation needs); "
+             "the level set written is empty");
+    }
     const auto t2 = std::chrono::steady_clock::now();
     std::string sources;
     for (const auto& p : opt.inputs) sources += (sources.empty() ? "" : " ") + p;

@@ -23,8 +23,9 @@ struct GradientOptions
 int runGradient(const GradientOptions& opt)
 {
     const auto t0 = std::chrono::steady_clock::now();
-    if (opt.step < 1) {
-        throw std::runtime_error("--step must be >= 1 voxel, got " + std::to_string(opt.step));
+    if (opt.step < 1 || opt.step > diff::kMaxStep) {
+        throw std::runtime_error("--step must be in [1, " + std::to_string(diff::kMaxStep) +
+                                 "] voxels, got " + std::to_string(opt.step));
     }
     io::checkOutputPath(opt.output);
     const openvdb::GridPtrVec grids = io::readVdb(opt.input);

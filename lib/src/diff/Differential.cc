@@ -1,5 +1,7 @@
 #include <ivdb/diff/Differential.h>
 
+#include <ivdb/util/System.h>
+
 #include <openvdb/tree/LeafManager.h>
 
 #include <tbb/task_arena.h>
@@ -75,8 +77,8 @@ double uniformVoxelSize(const openvdb::GridBase& grid)
     if (!grid.transform().isLinear() || std::abs(v[0] - v[1]) > 1e-9 * v[0] ||
         std::abs(v[0] - v[2]) > 1e-9 * v[0]) {
         OPENVDB_THROW(openvdb::ValueError,
-            "the grid's voxels are not cubes (voxel size " + std::to_string(v[0]) + " x " +
-            std::to_string(v[1]) + " x " + std::to_string(v[2]) +
+            "the grid's voxels are not cubes (voxel size " + util::formatNumber(v[0]) + " x " +
+            util::formatNumber(v[1]) + " x " + util::formatNumber(v[2]) +
             "); resample it to a uniform linear transform first");
     }
     return v[0];
@@ -212,9 +214,9 @@ void checkLevelSet(const openvdb::GridBase& grid, const std::string& what)
 
 openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step, bool threaded)
 {
-    if (step < 1) {
-        OPENVDB_THROW(openvdb::ValueError,
-            "the gradient step must be >= 1 voxel, got " + std::to_string(step));
+    if (step < 1 || step > kMaxStep) {
+        OPENVDB_THROW(openvdb::ValueError, "the gradient step must be in [1, " +
+            std::to_string(kMaxStep) + "] voxels, got " + std::to_string(step));
     }
     const double dx = uniformVoxelSize(phi);
     const float inv = float(1.0 / (2.0 * step * dx));

@@ -79,10 +79,15 @@ Vec3d Transform::gradient(const Vec3d& p) const
     return out;
 }
 
+// GCC cannot see that the child reads only the n entries written below.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 void Transform::values(const double* x, const double* y, const double* z, double* out,
                        std::size_t n) const
 {
-    double qx[kMaxBatch] = {}, qy[kMaxBatch] = {}, qz[kMaxBatch] = {};
+    double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
     for (std::size_t i = 0; i < n; ++i) {
         const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
         qx[i] = q[0];
@@ -92,6 +97,9 @@ void Transform::values(const double* x, const double* y, const double* z, double
     mChild->values(qx, qy, qz, out, n);
     for (std::size_t i = 0; i < n; ++i) out[i] *= mValueScale;
 }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 namespace {
 template<typename MapT>

@@ -62,12 +62,17 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& samples, double halfWidth
     openvdb::tools::dilateActiveValues(interface, sweepSteps, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::IGNORE_TILES);
     tree.topologyIntersection(interface);
-    if (tree.activeVoxelCount() == 0) return samples.copy(); // no surface: an empty band
+    auto empty = [&]() { // no surface: an empty band
+        auto g = openvdb::FloatGrid::create(bg);
+        g->setTransform(samples.transform().copy());
+        return g;
+    };
+    if (tree.activeVoxelCount() == 0) return empty();
 
     // OpenVDB's sdfToSdf, with the voxels next to the interface (the boundary condition) keeping
     // their own estimates.
     openvdb::tools::FastSweeping<openvdb::FloatGrid> sweeper;
-    if (!sweeper.initSdf(samples, 0.0f, /*isInputSdf=*/true)) return samples.copy();
+    if (!sweeper.initSdf(samples, 0.0f, /*isInputSdf=*/true)) return empty();
     openvdb::FloatGrid::Ptr out = sweeper.sdfGrid();
     {
         const float frozen = 0.5f * std::numeric_limits<float>::max();

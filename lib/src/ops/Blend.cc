@@ -50,6 +50,13 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
 
     // How many voxels each band must reach: the output band plus the blend's reach.
     const double reachVox = blendReach(p, settings.tolerance * dx) / dx;
+    if (!(halfWidth + reachVox < 1e6)) {
+        OPENVDB_THROW(openvdb::RuntimeError, "blend with p = " + util::formatNumber(p) +
+            " reaches " + util::formatNumber(std::ceil(reachVox)) + " voxels beyond the surfaces, "
+            "far more than any band can hold. Use the scene-level blend ({\"type\": \"blend\", "
+            "...} in a scene file, which needs no band extension), a larger p, or a larger "
+            "--tolerance");
+    }
     const int needVox = int(std::ceil(halfWidth + reachVox)) + 1;
 
     std::vector<openvdb::FloatGrid::Ptr> grids;
@@ -66,8 +73,10 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
         const openvdb::Coord dim = grids.back()->evalActiveVoxelDim();
         estimate += double(dim.x() + 2 * d) * double(dim.y() + 2 * d) * double(dim.z() + 2 * d) * 16.0;
     }
+    const double available = double(util::availableMemory()); // 0 when unknown
     const double limit = settings.memoryLimit ? double(settings.memoryLimit)
-                                              : 0.8 * double(util::availableMemory());
+                       : available > 0.0      ? 0.8 * available
+                                              : 1e18;
     if (estimate > limit) {
         std::ostringstream os;
         os << "blend with p = " << util::formatNumber(p) << " reaches " << std::ceil(reachVox)

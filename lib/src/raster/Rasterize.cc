@@ -456,9 +456,9 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         os << "voxel size must be > 0 and finite, got " << s.voxelSize;
         OPENVDB_THROW(openvdb::ValueError, os.str());
     }
-    if (!(s.halfWidth >= 1.0) || !std::isfinite(s.halfWidth)) {
+    if (!(s.halfWidth >= 1.0 && s.halfWidth <= kMaxHalfWidth)) {
         std::ostringstream os;
-        os << "half width must be >= 1 voxel and finite, got " << s.halfWidth;
+        os << "half width must be in [1, " << kMaxHalfWidth << "] voxels, got " << s.halfWidth;
         OPENVDB_THROW(openvdb::ValueError, os.str());
     }
     Context ctx;
@@ -510,7 +510,8 @@ std::uint64_t denseMemoryEstimate(const Implicit::Ptr& shape, const RasterSettin
 {
     const Context ctx = makeContext(shape, settings);
     const Coord d = ctx.region.dim();
-    return std::uint64_t(d.x()) * std::uint64_t(d.y()) * std::uint64_t(d.z()) * sizeof(float);
+    const double bytes = double(d.x()) * double(d.y()) * double(d.z()) * sizeof(float);
+    return bytes >= 1.8e19 ? std::numeric_limits<std::uint64_t>::max() : std::uint64_t(bytes);
 }
 
 openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettings& settings)
@@ -519,15 +520,17 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
 
     if (settings.sampling == Sampling::Dense) {
         const Coord d = ctx.region.dim();
-        const std::uint64_t need = std::uint64_t(d.x()) * d.y() * d.z() * sizeof(float);
-        const std::uint64_t limit = settings.denseMemoryLimit
-                                        ? settings.denseMemoryLimit
-                                        : std::uint64_t(0.8 * double(util::availableMemory()));
+        // In double: the product of three dimensions of up to 2^31 voxels overflows 64 bits.
+        const double need = double(d.x()) * double(d.y()) * double(d.z()) * sizeof(float);
+        const double available = double(util::availableMemory()); // 0 when unknown
+        const double limit = settings.denseMemoryLimit ? double(settings.denseMemoryLimit)
+                           : available > 0.0           ? 0.8 * available
+                                                       : 1e18;
         if (need > limit) {
             std::ostringstream os;
             os << "dense sampling of " << d.x() << " x " << d.y() << " x " << d.z()
-               << " voxels needs about " << util::formatBytes(double(need)) << " but only "
-               << util::formatBytes(double(limit))
+               << " voxels needs about " << util::formatBytes(need) << " but only "
+               << util::formatBytes(limit)
                << " may be used: use --sampling sparse, a larger voxel size or smaller bounds";
             OPENVDB_THROW(openvdb::RuntimeError, os.str());
         }

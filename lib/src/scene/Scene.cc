@@ -4,6 +4,7 @@
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
+#include <ivdb/raster/Rasterize.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/Exceptions.h>
@@ -158,9 +159,13 @@ private:
     const std::string& mOrigin;
 };
 
-Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin);
+Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin,
+                        int depth);
 
-std::vector<Implicit::Ptr> parseChildren(ObjectReader& r, std::size_t minCount)
+/// Deeper trees would exhaust the evaluation stack (each level keeps a batch of values on it).
+constexpr int kMaxDepth = 64;
+
+std::vector<Implicit::Ptr> parseChildren(ObjectReader& r, std::size_t minCount, int depth)
 {
     const json& c = r.raw("children");
     const std::string cpath = r.childPath("children");
@@ -171,7 +176,7 @@ std::vector<Implicit::Ptr> parseChildren(ObjectReader& r, std::size_t minCount)
     }
     std::vector<Implicit::Ptr> out;
     for (std::size_t i = 0; i < c.size(); ++i) {
-        out.push_back(parseNode(c[i], cpath + "[" + std::to_string(i) + "]", r.origin()));
+        out.push_back(parseNode(c[i], cpath + "[" + std::to_string(i) + "]", r.origin(), depth + 1));
     }
     return out;
 }
@@ -209,9 +214,14 @@ implicit::Mat4 parseMatrix(ObjectReader& r)
     return q;
 }
 
-Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin)
+Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin,
+                        int depth)
 {
     ObjectReader r(j, path, origin);
+    if (depth > kMaxDepth) {
+        r.fail(path, "the shape tree is nested more than " + std::to_string(kMaxDepth) +
+                         " levels deep; flatten it (union and intersection take many children)");
+    }
     static const std::vector<std::string> kTypes = {
         "sphere", "box", "torus", "quadric", "plane", "cylinder", "ellipsoid", "cone",
         "paraboloid", "hyperboloid", "union", "intersection", "difference", "blend", "transform"};
@@ -292,7 +302,7 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
             const auto op = type == "union" ? implicit::Csg::Op::Union
                           : type == "intersection" ? implicit::Csg::Op::Intersection
                                                    : implicit::Csg::Op::Difference;
-            node = std::make_shared<implicit::Csg>(op, parseChildren(r, 1));
+            node = std::make_shared<implicit::Csg>(op, parseChildren(r, 1, depth));
         } else if (type == "blend") {
             const std::string op = r.string("op", {"union", "intersection", "difference"});
             const double sharp = r.number("p");
@@ -303,7 +313,7 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
             const auto kind = op == "union" ? implicit::Csg::Op::Union
                             : op == "intersection" ? implicit::Csg::Op::Intersection
                                                    : implicit::Csg::Op::Difference;
-            node = std::make_shared<implicit::Blend>(kind, sharp, parseChildren(r, 2));
+            node = std::make_shared<implicit::Blend>(kind, sharp, parseChildren(r, 2, depth));
         } else if (type == "transform") {
             Vec3d scale(1.0);
             if (r.has("scale")) {
@@ -318,7 +328,7 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
                 }
             }
             const Vec3d t = r.vec3("translate", zero), rot = r.vec3("rotate_deg", zero);
-            auto child = parseNode(r.raw("child"), r.childPath("child"), origin);
+            auto child = parseNode(r.raw("child"), r.childPath("child"), origin, depth + 1);
             node = std::make_shared<implicit::Transform>(child, t, rot, scale);
         }
         return node;
@@ -345,8 +355,9 @@ Scene parseScene(const std::string& text, const std::string& origin)
     Scene scene;
     if (r.has("voxel_size")) scene.voxelSize = r.positive("voxel_size");
     scene.halfWidth = r.positive("half_width", 3.0);
-    if (scene.halfWidth < 1.0) {
-        r.fail("half_width", "must be >= 1 voxel, got " + util::formatNumber(scene.halfWidth));
+    if (scene.halfWidth < 1.0 || scene.halfWidth > raster::kMaxHalfWidth) {
+        r.fail("half_width", "must be in [1, " + util::formatNumber(raster::kMaxHalfWidth) +
+                                 "] voxels, got " + util::formatNumber(scene.halfWidth));
     }
     if (r.has("bounds")) {
         ObjectReader b(r.raw("bounds"), "bounds", origin);
@@ -362,7 +373,7 @@ Scene parseScene(const std::string& text, const std::string& origin)
         }
         scene.bounds = implicit::BBoxd(lo, hi);
     }
-    scene.shape = parseNode(r.raw("shape"), "shape", origin);
+    scene.shape = parseNode(r.raw("shape"), "shape", origin, 0);
     scene.json = j.dump();
     return scene;
 }

@@ -9,6 +9,10 @@
 
 namespace ivdb::diff {
 
+/// @brief The largest gradient step, in voxels (wider than any useful band: beyond it a stencil
+/// reads only the clamped background).
+inline constexpr int kMaxStep = 20;
+
 /// @brief Central-difference gradient (seed eq. 9) with a step of @a step voxels:
 /// (phi(x + K) - phi(x - K)) / (2 K dx) per axis, in world units.
 /// @details The output has the input's transform and active topology (the band), is named
@@ -16,7 +20,8 @@ namespace ivdb::diff {
 /// input's inactive values (+/- background, clamped), as OpenVDB's tools do. With step 1 it equals
 /// openvdb::tools::gradient. Leaf-parallel: each leaf's stencil reads one dense block gathered
 /// from the leaf and its neighbours' buffers, not per-voxel accessor calls.
-/// @throw openvdb::ValueError if @a step < 1 or the grid has a non-uniform voxel size
+/// @throw openvdb::ValueError if @a step is not in [1, kMaxStep] or the grid has a non-uniform
+/// voxel size
 openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step = 1,
                                  bool threaded = true);
 

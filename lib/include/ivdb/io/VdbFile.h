@@ -16,8 +16,10 @@ void checkOutputPath(const std::string& path);
 /// @brief Write @a grids to @a path with OpenVDB's default compression, atomically.
 /// @details The grids go to a temporary file in the same folder (`.NAME.tmp-PID-N`), which is
 /// flushed, synced and renamed over @a path: a failure (a full disk, say) or a kill leaves
-/// either the old file or the complete new one, never a partial file, and no temporary file
-/// after an error. Every stream error is checked, unlike io::File::write.
+/// either the old file or the complete new one, never a partial or clobbered @a path. After an
+/// error the temporary file is removed; a kill during the write can leave it behind (it is
+/// hidden, named after the output and the process id). Every stream error is checked, unlike
+/// io::File::write.
 /// @throw openvdb::IoError naming the path and the reason
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
               const openvdb::MetaMap& fileMetadata = openvdb::MetaMap());

@@ -20,10 +20,10 @@ namespace ivdb::levelset {
 /// two agree within @a agreement voxels; where they do not (near CSG creases, where
 /// f / |grad f| is only a bound: the distance to one child rather than to the result), the
 /// swept distance stays.
-/// @a estimates must hold every voxel within ceil(halfWidth) + 1 voxels of the interface as an
+/// @a samples (the estimates) must hold every voxel within ceil(halfWidth) + 1 voxels of the interface as an
 /// active voxel; its active topology is reduced in place. The result has its transform.
 /// @throw openvdb::RuntimeError if the interrupter cancels the run
-openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& estimates, double halfWidth,
+openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& samples, double halfWidth,
                                    openvdb::util::NullInterrupter* interrupter = nullptr,
                                    double keepEstimates = 1e9, double agreement = 1.0);
 

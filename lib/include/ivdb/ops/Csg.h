@@ -13,8 +13,9 @@ enum class CsgOp { Union, Intersection, Difference };
 /// difference = max(A, -B) of the first input with each following one subtracted.
 /// @details Inputs whose transform differs from the finest input's (smallest voxel) are first
 /// resampled onto it (openvdb::tools::resampleToMatch, which rebuilds level sets); each
-/// resampling is described in @a notes. Every input then gets the finest input's band (half
-/// width), so the result has one background. The combination is OpenVDB's csgUnion /
+/// resampling is described in @a notes. Every input then gets the finest input's background
+/// (a wider band is trimmed to it; a narrower one keeps its active voxels), so the result has
+/// one background. The combination is OpenVDB's csgUnion /
 /// csgIntersection / csgDifference (on copies of the inputs), which works in parallel over the union of the inputs'
 /// topologies, steals whole nodes where only one input has any, and handles inactive regions and
 /// tiles by their sign. The result is a level set named "surface" on the finest transform.

@@ -18,11 +18,14 @@ enum class Sampling {
     Dense
 };
 
+/// @brief The widest narrow band accepted, in voxels.
+inline constexpr double kMaxHalfWidth = 1000.0;
+
 struct RasterSettings
 {
     /// World units per voxel; must be > 0.
     double voxelSize = 0.0;
-    /// Half width of the narrow band in voxels; must be >= 1.
+    /// Half width of the narrow band in voxels; in [1, kMaxHalfWidth].
     double halfWidth = 3.0;
     Sampling sampling = Sampling::Sparse;
     /// Clipping box in world units: the shape is intersected with it. Required for unbounded
