@@ -25,7 +25,10 @@ using openvdb::Coord;
 class PaddedLeaf
 {
 public:
-    explicit PaddedLeaf(int pad): mPad(pad), mN(LeafT::DIM + 2 * pad), mData(size_t(mN) * mN * mN) {}
+    /// @param facesOnly  gather only the leaf and its 6 face neighbours' regions: enough for
+    /// stencils along the axes (the gradient); the edge and corner regions are left at zero.
+    PaddedLeaf(int pad, bool facesOnly)
+        : mPad(pad), mN(LeafT::DIM + 2 * pad), mFacesOnly(facesOnly), mData(size_t(mN) * mN * mN) {}
 
     void gather(openvdb::tree::ValueAccessor<const FloatTree>& acc, const Coord& origin)
     {
@@ -34,6 +37,7 @@ public:
         for (int lx = -reach; lx <= reach; ++lx)
         for (int ly = -reach; ly <= reach; ++ly)
         for (int lz = -reach; lz <= reach; ++lz) {
+            if (mFacesOnly && (lx != 0) + (ly != 0) + (lz != 0) > 1) continue;
             const Coord o = origin + Coord(lx * dim, ly * dim, lz * dim);
             // Overlap of this leaf-sized region with the padded block, in block coordinates.
             int lo[3], hi[3];
@@ -68,6 +72,7 @@ public:
 
 private:
     int mPad, mN;
+    bool mFacesOnly;
     std::vector<float> mData;
 };
 
@@ -100,7 +105,7 @@ void runMaybeSerial(bool threaded, Fn&& fn)
 /// that computes them (a serial TopologyCopy of a 12 M voxel band costs more in page faults than
 /// the whole stencil), then linked into the tree serially.
 template<typename OutGridT, typename Kernel>
-typename OutGridT::Ptr stencilMap(const openvdb::FloatGrid& phi, int pad,
+typename OutGridT::Ptr stencilMap(const openvdb::FloatGrid& phi, int pad, bool axesOnly,
                                   const typename OutGridT::ValueType& background, bool threaded,
                                   const Kernel& kernel)
 {
@@ -121,7 +126,7 @@ typename OutGridT::Ptr stencilMap(const openvdb::FloatGrid& phi, int pad,
         leaves.foreach([&](const LeafT& in, size_t idx) {
             if (in.isEmpty()) return;
             openvdb::tree::ValueAccessor<const FloatTree> acc(*src);
-            PaddedLeaf block(pad);
+            PaddedLeaf block(pad, axesOnly);
             block.gather(acc, in.origin());
             auto* leaf = new OutLeafT(in.origin(), background);
             leaf->setValueMask(in.getValueMask());
@@ -220,7 +225,7 @@ openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step, bool t
     }
     const double dx = uniformVoxelSize(phi);
     const float inv = float(1.0 / (2.0 * step * dx));
-    auto out = stencilMap<openvdb::Vec3SGrid>(phi, step, openvdb::Vec3s(0.0f), threaded,
+    auto out = stencilMap<openvdb::Vec3SGrid>(phi, step, /*axesOnly=*/true, openvdb::Vec3s(0.0f), threaded,
         [step, inv](const PaddedLeaf& b, int i, int j, int k) {
             return openvdb::Vec3s((b(i + step, j, k) - b(i - step, j, k)) * inv,
                                   (b(i, j + step, k) - b(i, j - step, k)) * inv,
@@ -254,7 +259,7 @@ openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
     switch (kind) {
     case Curvature::Mean: {
         const float inv2dx = float(1.0 / (2.0 * dx));
-        out = stencilMap<openvdb::FloatGrid>(phi, 1, 0.0f, threaded,
+        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
             [inv2dx](const PaddedLeaf& b, int i, int j, int k) {
                 float alpha, beta;
                 if (!Derivatives(b, i, j, k).mean(alpha, beta)) return 0.0f;
@@ -264,7 +269,7 @@ openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
     }
     case Curvature::Gaussian: {
         const double invdx2 = 1.0 / (dx * dx);
-        out = stencilMap<openvdb::FloatGrid>(phi, 1, 0.0f, threaded,
+        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
             [invdx2](const PaddedLeaf& b, int i, int j, int k) {
                 double g;
                 return Derivatives(b, i, j, k).gaussian(g) ? float(g * invdx2) : 0.0f;
@@ -273,7 +278,7 @@ openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
     }
     case Curvature::Laplacian: {
         const float invdx2 = float(1.0 / (dx * dx));
-        out = stencilMap<openvdb::FloatGrid>(phi, 1, 0.0f, threaded,
+        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
             [invdx2](const PaddedLeaf& b, int i, int j, int k) {
                 const float c = b(i, j, k);
                 return (b(i + 1, j, k) + b(i - 1, j, k) + b(i, j + 1, k) + b(i, j - 1, k) +
@@ -292,7 +297,7 @@ principalCurvatures(const openvdb::FloatGrid& phi, bool threaded)
     const double invdx = 1.0 / uniformVoxelSize(phi);
     // k = H +/- sqrt(H^2 - K), from the same differences as the mean and Gaussian curvatures.
     auto principal = [&](double sign) {
-        return stencilMap<openvdb::FloatGrid>(phi, 1, 0.0f, threaded,
+        return stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
             [invdx, sign](const PaddedLeaf& b, int i, int j, int k) {
                 const Derivatives d(b, i, j, k);
                 float alpha, beta;

@@ -256,8 +256,11 @@ openvdb::GridPtrVec readVdb(const std::string& path)
     validateLayout(path);
     openvdb::GridPtrVecPtr grids;
     try {
+        // Delayed loading: topology now, voxel buffers when first touched, so the (single-
+        // threaded) decompression happens inside the parallel operations that read them. The
+        // layout was checked above, so every grid's bytes are in the file.
         openvdb::io::File file(path);
-        file.open(/*delayLoad=*/false);
+        file.open(/*delayLoad=*/true);
         grids = file.getGrids();
         file.close();
     } catch (const std::exception& e) {

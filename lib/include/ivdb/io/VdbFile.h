@@ -24,7 +24,8 @@ void checkOutputPath(const std::string& path);
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
               const openvdb::MetaMap& fileMetadata = openvdb::MetaMap());
 
-/// @brief Read every grid of a .vdb file, fully loaded.
+/// @brief Read every grid of a .vdb file: topology and metadata now, voxel values on first
+/// access (OpenVDB's delayed loading), after checking the file's layout.
 /// @throw openvdb::IoError naming the path if it is missing, a folder, not a .vdb file,
 /// truncated or corrupt
 openvdb::GridPtrVec readVdb(const std::string& path);
