@@ -99,11 +99,12 @@ void addCompareGradient(CLI::App& app, Action& action)
         "step K voxels) with the normalized analytic gradient: angle and magnitude error "
         "statistics per step (the seed's section 3.3 observation)");
     cmd->add_option("scene", opt->scene, "Scene file (JSON)")->required();
-    cmd->add_option("--step", opt->steps, "Difference step(s) K in voxels, >= 1 (repeat or give "
+    cmd->add_option("--step", opt->steps, "Difference step(s) K in voxels, in [1, 20] (give "
                                           "several: --step 1 2 4)")
         ->capture_default_str();
     cmd->add_option("--voxel-size", opt->voxelSize, "World units per voxel (overrides the scene)");
-    cmd->add_option("--half-width", opt->halfWidth, "Band half width in voxels (overrides the scene)");
+    cmd->add_option("--half-width", opt->halfWidth,
+                    "Band half width in voxels, in [1, 1000] (overrides the scene)");
     cmd->add_flag("--json", opt->json, "Print JSON instead of a table");
     cmd->callback([&action, opt]() { action = [opt]() { return runCompare(*opt); }; });
 }

@@ -76,7 +76,7 @@ void addGradient(CLI::App& app, Action& action)
     cmd->add_option("input", opt->input, "Input .vdb file")->required();
     cmd->add_option("-o,--output", opt->output, "Output .vdb file (written atomically)")->required();
     cmd->add_option("--step", opt->step,
-                    "Difference step K in voxels: (phi(x+K) - phi(x-K)) / (2 K dx); >= 1")
+                    "Difference step K in voxels: (phi(x+K) - phi(x-K)) / (2 K dx); in [1, 20]")
         ->capture_default_str();
     cmd->add_option("--grid", opt->grid, "Input grid name (default: the first level set)");
     cmd->add_flag("--magnitude", opt->magnitude, "Also write 'gradient_magnitude' (|gradient|)");

@@ -92,7 +92,7 @@ void addRasterize(CLI::App& app, Action& action)
                     "World units per voxel (overrides the scene's voxel_size); > 0");
     cmd->add_option("--half-width", opt->halfWidth,
                     "Narrow-band half width in voxels (overrides the scene's half_width, "
-                    "default 3); >= 1");
+                    "default 3); in [1, 1000]");
     cmd->add_option("--sampling", opt->sampling,
                     "sparse: interval-pruned, cost grows with the surface; dense: every voxel "
                     "of the bounding box (the reference; refuses if it would not fit in memory)")
