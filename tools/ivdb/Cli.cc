@@ -1,6 +1,8 @@
 #include "Cli.h"
 
 #include <ivdb/Version.h>
+#include <ivdb/diff/Differential.h>
+#include <ivdb/io/VdbFile.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/openvdb.h>
@@ -97,6 +99,38 @@ raster::RasterSettings sceneSettings(const scene::Scene& sc, const std::string& 
 void warn(const std::string& what)
 {
     std::cerr << "ivdb: warning: " << what << std::endl;
+}
+
+openvdb::FloatGrid::Ptr readLevelSet(const std::string& path, const std::string& grid)
+{
+    const openvdb::GridBase::Ptr g = io::selectGrid(io::readVdb(path), path, grid);
+    diff::checkLevelSet(*g, path + ": grid '" + g->getName() + "'");
+    return openvdb::gridPtrCast<openvdb::FloatGrid>(g);
+}
+
+void stampGrid(openvdb::GridBase& grid, const std::string& source)
+{
+    grid.insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
+    grid.insertMeta("ivdb_source", openvdb::StringMetadata(source));
+}
+
+void writeOutput(const std::string& path, const openvdb::GridCPtrVec& grids)
+{
+    openvdb::MetaMap fileMeta;
+    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
+    io::writeVdb(path, grids, fileMeta);
+}
+
+ops::CsgOp csgOp(const std::string& word)
+{
+    return word == "union" ? ops::CsgOp::Union
+         : word == "intersection" ? ops::CsgOp::Intersection
+                                  : ops::CsgOp::Difference;
+}
+
+void printNotes(const std::vector<std::string>& notes)
+{
+    for (const auto& n : notes) std::cerr << "ivdb: note: " << n << std::endl;
 }
 
 int run(int argc, char** argv)

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <ivdb/ops/Csg.h>
 #include <ivdb/raster/Rasterize.h>
 #include <ivdb/scene/Scene.h>
 
@@ -12,6 +13,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace ivdb::cli {
 
@@ -58,5 +60,22 @@ private:
 
 /// @brief Print a warning line `ivdb: warning: <what>` on stderr.
 void warn(const std::string& what);
+
+/// @brief The level set @a grid (or the first level set) of the .vdb file @a path, checked to be
+/// a scalar float level set with cubic voxels.
+/// @throw openvdb::Exception naming the file, the grid and what to pick instead
+openvdb::FloatGrid::Ptr readLevelSet(const std::string& path, const std::string& grid);
+
+/// @brief Stamp @a grid with `ivdb_version` and `ivdb_source` (what made it).
+void stampGrid(openvdb::GridBase& grid, const std::string& source);
+
+/// @brief Write @a grids atomically to @a path with the file's `creator` metadata.
+void writeOutput(const std::string& path, const openvdb::GridCPtrVec& grids);
+
+/// @brief "union" | "intersection" | "difference" (the CLI checked the word) as an operation.
+ops::CsgOp csgOp(const std::string& word);
+
+/// @brief Print each note as `ivdb: note: ...` on stderr.
+void printNotes(const std::vector<std::string>& notes);
 
 } // namespace ivdb::cli

@@ -41,23 +41,16 @@ int runBlend(const BlendOptions& opt)
     }
     io::checkOutputPath(opt.output);
     std::vector<openvdb::FloatGrid::ConstPtr> grids;
-    for (const std::string& path : opt.inputs) {
-        const openvdb::GridBase::Ptr g = io::selectGrid(io::readVdb(path), path, opt.grid);
-        diff::checkLevelSet(*g, path + ": grid '" + g->getName() + "'");
-        grids.push_back(openvdb::gridConstPtrCast<openvdb::FloatGrid>(g));
-    }
+    for (const std::string& path : opt.inputs) grids.push_back(readLevelSet(path, opt.grid));
     const auto t1 = std::chrono::steady_clock::now();
     ops::BlendSettings settings;
     settings.p = opt.p;
     settings.tolerance = opt.tolerance;
     Progress progress("blend");
     settings.interrupter = &progress;
-    const ops::CsgOp op = opt.op == "union" ? ops::CsgOp::Union
-                        : opt.op == "intersection" ? ops::CsgOp::Intersection
-                                                   : ops::CsgOp::Difference;
     std::vector<std::string> notes;
-    auto result = ops::blend(op, grids, settings, &notes);
-    for (const auto& n : notes) std::fprintf(stderr, "ivdb: note: %s\n", n.c_str());
+    auto result = ops::blend(csgOp(opt.op), grids, settings, &notes);
+    printNotes(notes);
     if (result->activeVoxelCount() == 0) {
         warn("the result has no surface (the inputs do not overlap as this operation needs); "
              "the level set written is empty");
@@ -65,12 +58,8 @@ int runBlend(const BlendOptions& opt)
     const auto t2 = std::chrono::steady_clock::now();
     std::string sources;
     for (const auto& p : opt.inputs) sources += (sources.empty() ? "" : " ") + p;
-    result->insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
-    result->insertMeta("ivdb_source", openvdb::StringMetadata(
-        "blend " + opt.op + " p=" + util::formatNumber(opt.p) + " " + sources));
-    openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    io::writeVdb(opt.output, {result}, fileMeta);
+    stampGrid(*result, "blend " + opt.op + " p=" + util::formatNumber(opt.p) + " " + sources);
+    writeOutput(opt.output, {result});
     const auto t3 = std::chrono::steady_clock::now();
     if (!opt.quiet) {
         std::printf("blend %s p=%s of %zu level sets: %llu active voxels, read %.3f s, blend "

@@ -29,18 +29,12 @@ int runCsg(const CsgOptions& opt)
     }
     io::checkOutputPath(opt.output);
     std::vector<openvdb::FloatGrid::Ptr> grids;
-    for (const std::string& path : opt.inputs) {
-        const openvdb::GridBase::Ptr g = io::selectGrid(io::readVdb(path), path, opt.grid);
-        diff::checkLevelSet(*g, path + ": grid '" + g->getName() + "'");
-        grids.push_back(openvdb::gridPtrCast<openvdb::FloatGrid>(g));
-    }
+    for (const std::string& path : opt.inputs) grids.push_back(readLevelSet(path, opt.grid));
     const auto t1 = std::chrono::steady_clock::now();
-    const ops::CsgOp op = opt.op == "union" ? ops::CsgOp::Union
-                        : opt.op == "intersection" ? ops::CsgOp::Intersection
-                                                   : ops::CsgOp::Difference;
     std::vector<std::string> notes;
-    auto result = ops::csgInPlace(op, grids, &notes); // the inputs are not needed afterwards
-    for (const auto& n : notes) std::fprintf(stderr, "ivdb: note: %s\n", n.c_str());
+    // In place: the inputs are not needed afterwards.
+    auto result = ops::csgInPlace(csgOp(opt.op), grids, &notes);
+    printNotes(notes);
     if (result->activeVoxelCount() == 0) {
         warn("the result has no surface (the inputs do not overlap as this operation needs); "
              "the level set written is empty");
@@ -48,11 +42,8 @@ int runCsg(const CsgOptions& opt)
     const auto t2 = std::chrono::steady_clock::now();
     std::string sources;
     for (const auto& p : opt.inputs) sources += (sources.empty() ? "" : " ") + p;
-    result->insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
-    result->insertMeta("ivdb_source", openvdb::StringMetadata("csg " + opt.op + " " + sources));
-    openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    io::writeVdb(opt.output, {result}, fileMeta);
+    stampGrid(*result, "csg " + opt.op + " " + sources);
+    writeOutput(opt.output, {result});
     const auto t3 = std::chrono::steady_clock::now();
     if (!opt.quiet) {
         std::printf("csg %s of %zu level sets: %llu active voxels, read %.3f s, combine %.3f s, "

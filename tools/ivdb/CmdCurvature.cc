@@ -30,10 +30,7 @@ int runCurvature(const CurvatureOptions& opt)
 {
     const auto t0 = std::chrono::steady_clock::now();
     io::checkOutputPath(opt.output);
-    const openvdb::GridPtrVec grids = io::readVdb(opt.input);
-    const openvdb::GridBase::Ptr base = io::selectGrid(grids, opt.input, opt.grid);
-    diff::checkLevelSet(*base, opt.input + ": grid '" + base->getName() + "'");
-    const auto phi = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
+    const auto phi = readLevelSet(opt.input, opt.grid);
 
     const auto t1 = std::chrono::steady_clock::now();
     openvdb::GridPtrVec computed;
@@ -50,15 +47,12 @@ int runCurvature(const CurvatureOptions& opt)
 
     openvdb::GridCPtrVec out;
     for (auto& g : computed) {
-        g->insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
-        g->insertMeta("ivdb_source", openvdb::StringMetadata(opt.input + ":" + phi->getName()));
+        stampGrid(*g, opt.input + ":" + phi->getName());
         g->insertMeta("ivdb_curvature", openvdb::StringMetadata(convention(opt.method)));
         out.push_back(g);
     }
     if (opt.withInput) out.push_back(phi);
-    openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    io::writeVdb(opt.output, out, fileMeta);
+    writeOutput(opt.output, out);
     const auto t3 = std::chrono::steady_clock::now();
     if (!opt.quiet) {
         std::printf("%s: %s curvature of '%s', %llu active voxels, read %.3f s, compute %.3f s, "

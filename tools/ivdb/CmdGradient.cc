@@ -28,30 +28,23 @@ int runGradient(const GradientOptions& opt)
                                  "] voxels, got " + std::to_string(opt.step));
     }
     io::checkOutputPath(opt.output);
-    const openvdb::GridPtrVec grids = io::readVdb(opt.input);
-    const openvdb::GridBase::Ptr base = io::selectGrid(grids, opt.input, opt.grid);
-    diff::checkLevelSet(*base, opt.input + ": grid '" + base->getName() + "'");
-    const auto phi = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
+    const auto phi = readLevelSet(opt.input, opt.grid);
 
     const auto t1 = std::chrono::steady_clock::now();
     auto grad = diff::gradient(*phi, opt.step);
     const auto t2 = std::chrono::steady_clock::now();
 
     const std::string source = opt.input + ":" + phi->getName();
-    grad->insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
-    grad->insertMeta("ivdb_source", openvdb::StringMetadata(source));
+    stampGrid(*grad, source);
     grad->insertMeta("ivdb_step_voxels", openvdb::Int32Metadata(opt.step));
     openvdb::GridCPtrVec out{grad};
     if (opt.magnitude) {
         auto mag = diff::magnitude(*grad);
-        mag->insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
-        mag->insertMeta("ivdb_source", openvdb::StringMetadata(source));
+        stampGrid(*mag, source);
         out.push_back(mag);
     }
     if (opt.withInput) out.push_back(phi);
-    openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    io::writeVdb(opt.output, out, fileMeta);
+    writeOutput(opt.output, out);
     const auto t3 = std::chrono::steady_clock::now();
     if (!opt.quiet) {
         std::printf("%s: gradient of '%s', step %d, %llu active voxels, read %.3f s, compute "

@@ -53,12 +53,10 @@ int runRasterize(const RasterizeOptions& opt)
            << "check the shape and bounds, or use a smaller voxel size; nothing was written";
         throw std::runtime_error(os.str());
     }
-    grid->insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
+    stampGrid(*grid, opt.scene);
     grid->insertMeta("ivdb_scene", openvdb::StringMetadata(sc.json));
     grid->insertMeta("ivdb_sampling", openvdb::StringMetadata(opt.sampling));
-    openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    io::writeVdb(opt.output, {grid}, fileMeta);
+    writeOutput(opt.output, {grid});
     const auto t2 = std::chrono::steady_clock::now();
 
     if (!opt.quiet) {
