@@ -1,0 +1,186 @@
+// End-to-end runs of ivdb csg and ivdb blend: the level set written (read back with OpenVDB),
+// and the errors for bad input (non-zero exit, `ivdb: error: ` message, no output file, an
+// existing output untouched).
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result
+{
+    int exitCode = -1;
+    std::string err;
+};
+
+std::string slurp(const fs::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+class TestCliOps: public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        mDir = fs::temp_directory_path() /
+               ("ivdb-test-cli-ops-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        fs::remove_all(mDir);
+        fs::create_directories(mDir);
+        // Two overlapping spheres (radius 0.6, voxel size 0.02), a fog grid and a text file.
+        write("a.vdb", sphere(-0.35f, 0.02f));
+        write("b.vdb", sphere(0.35f, 0.02f));
+        write("coarse.vdb", sphere(0.35f, 0.04f));
+        auto fog = sphere(0.0f, 0.02f);
+        fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+        fog->setName("density");
+        write("fog.vdb", fog);
+        std::ofstream(mDir / "text.vdb") << "not a vdb file\n";
+    }
+
+    void TearDown() override
+    {
+        std::error_code ec;
+        fs::remove_all(mDir, ec);
+    }
+
+    static openvdb::FloatGrid::Ptr sphere(float cx, float dx)
+    {
+        auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+            0.6f, openvdb::Vec3f(cx, 0.0f, 0.0f), dx, 3.0f);
+        g->setName("surface");
+        return g;
+    }
+
+    void write(const std::string& name, openvdb::GridBase::Ptr grid) const
+    {
+        openvdb::io::File f((mDir / name).string());
+        f.write({grid});
+        f.close();
+    }
+
+    std::string path(const std::string& name) const { return (mDir / name).string(); }
+
+    Result run(const std::vector<std::string>& args) const
+    {
+        std::string cmd = "cd '" + mDir.string() + "' && exec timeout -s KILL 120 '" +
+                          std::string(IVDB_BINARY) + "'";
+        for (const auto& a : args) cmd += " '" + a + "'";
+        cmd += " >/dev/null 2>'" + (mDir / "stderr.txt").string() + "' </dev/null";
+        const int status = std::system(cmd.c_str());
+        Result r;
+        r.exitCode = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : 1000;
+        r.err = slurp(mDir / "stderr.txt");
+        fs::remove(mDir / "stderr.txt");
+        return r;
+    }
+
+    openvdb::FloatGrid::Ptr readSurface(const std::string& name) const
+    {
+        openvdb::io::File f(path(name));
+        f.open();
+        auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(f.readGrid("surface"));
+        f.close();
+        return g;
+    }
+
+    /// A failing run: non-zero, the message, and @a out neither created nor changed.
+    void expectRefused(std::vector<std::string> args, const std::string& mention) const
+    {
+        for (bool existing : {false, true}) {
+            const fs::path out = mDir / "out.vdb";
+            fs::remove(out);
+            if (existing) std::ofstream(out) << "previous output";
+            std::vector<std::string> full = args;
+            full.insert(full.end(), {"-o", out.string()});
+            const Result r = run(full);
+            EXPECT_NE(r.exitCode, 0) << mention;
+            EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << r.err;
+            EXPECT_NE(r.err.find(mention), std::string::npos) << "expected '" << mention << "' in: " << r.err;
+            if (existing) {
+                EXPECT_EQ(slurp(out), "previous output") << mention;
+            } else {
+                EXPECT_FALSE(fs::exists(out)) << mention;
+            }
+            for (const auto& e : fs::directory_iterator(mDir)) {
+                EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+            }
+        }
+    }
+
+    fs::path mDir;
+};
+
+} // namespace
+
+TEST_F(TestCliOps, CsgWritesTheCombinedLevelSet)
+{
+    for (const std::string op : {"union", "intersection", "difference"}) {
+        ASSERT_EQ(run({"csg", op, "a.vdb", "b.vdb", "-o", "out_" + op + ".vdb", "-q"}).exitCode, 0);
+        auto g = readSurface("out_" + op + ".vdb");
+        ASSERT_TRUE(g);
+        EXPECT_EQ(g->getGridClass(), openvdb::GRID_LEVEL_SET);
+        EXPECT_GT(g->activeVoxelCount(), 1000u);
+        // Origin: inside both spheres, so inside the union and intersection, outside A - B.
+        const float v = g->tree().getValue(openvdb::Coord(0, 0, 0));
+        EXPECT_EQ(v > 0.0f, op == "difference") << op << " " << v;
+    }
+    // A coarser input is resampled onto the finest one, with a note on stderr.
+    const Result r = run({"csg", "union", "a.vdb", "coarse.vdb", "-o", "mixed.vdb", "-q"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.err.find("ivdb: note:"), std::string::npos) << r.err;
+    EXPECT_NEAR(readSurface("mixed.vdb")->voxelSize()[0], 0.02, 1e-9);
+}
+
+TEST_F(TestCliOps, BlendWritesTheBlendedLevelSet)
+{
+    const Result r = run({"blend", "union", "a.vdb", "b.vdb", "-p", "50", "-o", "blend.vdb", "-q"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.err.find("bands extended"), std::string::npos) << r.err;
+    auto g = readSurface("blend.vdb");
+    EXPECT_EQ(g->getGridClass(), openvdb::GRID_LEVEL_SET);
+    // At (0, 0.5, 0), over the neck, both spheres are 0.0103 away: outside the sharp union, but
+    // inside the blend, whose value there is 0.0103 - ln(2)/50 = -0.0035.
+    ASSERT_EQ(run({"csg", "union", "a.vdb", "b.vdb", "-o", "sharp.vdb", "-q"}).exitCode, 0);
+    const openvdb::Coord neck(0, 25, 0);
+    const float sharp = readSurface("sharp.vdb")->tree().getValue(neck);
+    const float blended = g->tree().getValue(neck);
+    EXPECT_NEAR(sharp, 0.0103f, 0.002f);
+    EXPECT_LT(blended, 0.0f) << blended;
+    EXPECT_GT(blended, -0.02f) << blended;
+}
+
+TEST_F(TestCliOps, BadInputsAreRefused)
+{
+    expectRefused({"csg", "union", "a.vdb", "fog.vdb"}, "fog volume");
+    expectRefused({"csg", "union", "a.vdb", "missing.vdb"}, "missing.vdb");
+    expectRefused({"csg", "union", "a.vdb", "text.vdb"}, "text.vdb");
+    expectRefused({"csg", "union", "a.vdb", "b.vdb", "--grid", "nosuch"}, "nosuch");
+    expectRefused({"csg", "union", "a.vdb"}, "at least two");
+    expectRefused({"blend", "union", "a.vdb", "b.vdb", "-p", "0"}, "-p must be in [0.1, 1000]");
+    expectRefused({"blend", "union", "a.vdb", "b.vdb", "-p", "-1"}, "-p must be in [0.1, 1000]");
+    expectRefused({"blend", "union", "a.vdb", "fog.vdb", "-p", "10"}, "fog volume");
+    expectRefused({"blend", "union", "a.vdb", "b.vdb", "-p", "10", "--tolerance", "0"},
+                  "--tolerance");
+    // An extension that cannot fit is refused with a pointer to the scene-level blend.
+    expectRefused({"blend", "union", "a.vdb", "b.vdb", "-p", "0.1", "--tolerance", "1e-9"},
+                  "scene-level blend");
+}
