@@ -1,5 +1,7 @@
 #include <ivdb/implicit/Primitives.h>
 
+#include "Checks.h"
+
 #include <openvdb/Exceptions.h>
 
 #include <algorithm>
@@ -8,27 +10,12 @@
 
 namespace ivdb::implicit {
 
+using detail::requireFinite;
+using detail::requirePositive;
+
 namespace {
 
-void requireFinite(const Vec3d& v, const char* what)
-{
-    for (int i = 0; i < 3; ++i) {
-        if (!std::isfinite(v[i])) {
-            std::ostringstream os;
-            os << what << " must be finite, got [" << v[0] << ", " << v[1] << ", " << v[2] << "]";
-            OPENVDB_THROW(openvdb::ValueError, os.str());
-        }
-    }
-}
 
-void requirePositive(double v, const char* what)
-{
-    if (!(v > 0.0) || !std::isfinite(v)) {
-        std::ostringstream os;
-        os << what << " must be > 0 and finite, got " << v;
-        OPENVDB_THROW(openvdb::ValueError, os.str());
-    }
-}
 
 // The per-point formulas, shared by value() and values() so both give the same bits.
 inline double sphereValue(double x, double y, double z, double cx, double cy, double cz, double r)

@@ -1,11 +1,16 @@
 #include <ivdb/implicit/Quadric.h>
 
+#include "Checks.h"
+
 #include <openvdb/Exceptions.h>
 
 #include <cmath>
 #include <sstream>
 
 namespace ivdb::implicit {
+
+using detail::requireFinite;
+using detail::requirePositive;
 
 namespace {
 
@@ -24,25 +29,7 @@ double det3(const double m[3][3])
          + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
 }
 
-void requirePositive(double v, const char* what)
-{
-    if (!(v > 0.0) || !std::isfinite(v)) {
-        std::ostringstream os;
-        os << what << " must be > 0 and finite, got " << v;
-        OPENVDB_THROW(openvdb::ValueError, os.str());
-    }
-}
 
-void requireFinite(const Vec3d& v, const char* what)
-{
-    for (int i = 0; i < 3; ++i) {
-        if (!std::isfinite(v[i])) {
-            std::ostringstream os;
-            os << what << " must be finite";
-            OPENVDB_THROW(openvdb::ValueError, os.str());
-        }
-    }
-}
 
 Mat4 diagonal(double a, double b, double c, double d)
 {

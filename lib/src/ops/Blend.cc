@@ -40,11 +40,7 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
         OPENVDB_THROW(openvdb::ValueError, "a blend needs at least two level sets, got " +
                                                std::to_string(inputs.size()));
     }
-    size_t finest = 0;
-    for (size_t i = 1; i < inputs.size(); ++i) {
-        if (inputs[i]->voxelSize()[0] < inputs[finest]->voxelSize()[0]) finest = i;
-    }
-    const openvdb::math::Transform& target = inputs[finest]->transform();
+    const openvdb::math::Transform& target = finestInput(inputs).transform();
     const double dx = target.voxelSize()[0];
     const double halfWidth = double(inputs[0]->background()) / dx; // the output's, in voxels
 

@@ -61,12 +61,9 @@ openvdb::FloatGrid::Ptr csgInPlace(CsgOp op, const std::vector<openvdb::FloatGri
         OPENVDB_THROW(openvdb::ValueError, "CSG needs at least two level sets, got " +
                                                std::to_string(inputs.size()));
     }
-    size_t finest = 0;
-    for (size_t i = 1; i < inputs.size(); ++i) {
-        if (inputs[i]->voxelSize()[0] < inputs[finest]->voxelSize()[0]) finest = i;
-    }
-    const openvdb::math::Transform::Ptr target = inputs[finest]->transform().copy();
-    const float bg = inputs[finest]->background();
+    const openvdb::FloatGrid& finest = finestInput(inputs);
+    const openvdb::math::Transform::Ptr target = finest.transform().copy();
+    const float bg = finest.background();
     // Inputs already on the target with its band are used as they are.
     auto prepare = [&](const openvdb::FloatGrid::Ptr& in) -> openvdb::FloatGrid::Ptr {
         if (in->transform() == *target && in->background() == bg) return in;

@@ -29,6 +29,18 @@ openvdb::FloatGrid::Ptr csg(CsgOp op, const std::vector<openvdb::FloatGrid::Cons
 openvdb::FloatGrid::Ptr csgInPlace(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& inputs,
                                    std::vector<std::string>* notes = nullptr);
 
+/// @brief The input with the smallest voxels (the first on ties): the one the others are
+/// resampled onto. @a inputs must not be empty.
+template<typename GridPtrT>
+const openvdb::FloatGrid& finestInput(const std::vector<GridPtrT>& inputs)
+{
+    size_t finest = 0;
+    for (size_t i = 1; i < inputs.size(); ++i) {
+        if (inputs[i]->voxelSize()[0] < inputs[finest]->voxelSize()[0]) finest = i;
+    }
+    return *inputs[finest];
+}
+
 /// @brief @a grid on @a target's transform: a copy if the transforms match, else a resampled
 /// level set (a note is appended to @a notes).
 openvdb::FloatGrid::Ptr matchTransform(const openvdb::FloatGrid& grid,
