@@ -94,13 +94,16 @@ def gbench_medians(pattern, reps):
 def bench_csg(tmp, big, reps):
     med = gbench_medians_full("(CsgUnion|BlendUnion)", reps)
     ours, ref = med[f"BM_CsgUnion/{big}/real_time"], med[f"BM_OpenVDB_CsgUnion/{big}/real_time"]
-    sharp100, blend100 = med["BM_CsgUnion/100/real_time"], med["BM_BlendUnion_p1000/100/real_time"]
     print("| compute only (Google Benchmark), two spheres | ivdb | OpenVDB / sharp | ratio |")
     print("|---|---|---|---|")
     print(f"| csg union (radius {big}) vs tools::csgUnion | {ours:.1f} ms | {ref:.1f} ms | "
           f"**{ours / ref:.2f}x the time** |")
-    print(f"| blend union, 2-voxel band extension (radius 100) vs sharp csg union | {blend100:.0f} ms | "
-          f"{sharp100:.1f} ms | **{blend100 / sharp100:.0f}x the time** |\n")
+    # p = 1000: 2-voxel band extension at radius 100, 3 at 400; p = 0.8 * radius: 6 voxels.
+    for r, p, ext in ((100, 1000, 2), (big, 1000, 3), (100, 80, 6), (big, int(0.8 * big), 6)):
+        blend, sharp = med[f"BM_BlendUnion/{r}/{p}/real_time"], med[f"BM_CsgUnion/{r}/real_time"]
+        print(f"| blend union p = {p}, {ext}-voxel band extension (radius {r}) vs sharp csg union | "
+              f"{blend:.0f} ms | {sharp:.1f} ms | **{blend / sharp:.0f}x the time** |")
+    print()
     a, b = os.path.join(tmp, "a.vdb"), os.path.join(tmp, "b.vdb")
     for path, cx in ((a, -0.35), (b, 0.35)):
         scene = os.path.join(tmp, "s.json")
@@ -117,6 +120,18 @@ def bench_csg(tmp, big, reps):
     print("|---|---|---|---|")
     print(f"| wall time | {t['ivdb']:.2f} s | {t['vdb_tool']:.2f} s | **{t['vdb_tool'] / t['ivdb']:.2f}x faster** |")
     print(f"| peak memory | {m['ivdb']:.0f} MB | {m['vdb_tool']:.0f} MB | {m['vdb_tool'] / m['ivdb']:.2f}x less |\n")
+    p6 = int(0.8 * big)
+    t, m = median_runs({
+        "csg": [IVDB, "csg", "union", a, b, "-o", out_a, "-q"],
+        "blend1000": [IVDB, "blend", "union", a, b, "-p", "1000", "-o", out_b, "-q"],
+        "blend6": [IVDB, "blend", "union", a, b, "-p", str(p6), "-o", out_b, "-q"],
+    }, reps)
+    print("| end to end, two radius-%d spheres | ivdb blend union | ivdb csg union | ratio |" % big)
+    print("|---|---|---|---|")
+    print(f"| p = 1000 (3-voxel extension) | {t['blend1000']:.2f} s | {t['csg']:.2f} s | "
+          f"**{t['blend1000'] / t['csg']:.1f}x the time** |")
+    print(f"| p = {p6} (6-voxel extension) | {t['blend6']:.2f} s | {t['csg']:.2f} s | "
+          f"**{t['blend6'] / t['csg']:.1f}x the time** |\n")
 
 
 def bench_diff(tmp, big, reps):

@@ -31,49 +31,119 @@ protected:
 TEST_F(TestBlendGrid, MatchesAnalyticBlendedSurface)
 {
     const Vec3d ca(-0.3437, 0.0123, -0.0071), cb(0.3512, -0.0089, 0.0043);
-    // Coarser voxels for smaller p keep the extended bands (ln(1/(p tol))/p) small.
-    for (auto [p, dx] : {std::pair<double, double>{50.0, 0.01}, {10.0, 0.02}, {4.0, 0.04}}) {
-        auto a = sphere(ca, dx), b = sphere(cb, dx);
-        ops::BlendSettings s;
-        s.p = p;
-        std::vector<std::string> notes;
-        auto g = ops::blend(ops::CsgOp::Union, {a, b}, s, &notes);
-        ASSERT_EQ(notes.size(), 1u);
-        EXPECT_EQ(g->getName(), "surface");
-        EXPECT_EQ(g->getGridClass(), openvdb::GRID_LEVEL_SET);
-        EXPECT_FLOAT_EQ(g->background(), a->background());
+    const std::pair<ops::CsgOp, implicit::Csg::Op> kOps[] = {
+        {ops::CsgOp::Union, implicit::Csg::Op::Union},
+        {ops::CsgOp::Intersection, implicit::Csg::Op::Intersection},
+        {ops::CsgOp::Difference, implicit::Csg::Op::Difference}};
+    // Coarser voxels for smaller p keep the extended bands (ln(1/(p tol))/p) small. At p = 4 the
+    // intersection and difference shrink the 0.5-wide lens by up to ln(2)/p = 0.17 on each side,
+    // which at voxel size 0.04 leaves too few voxels across it for a central-difference gradient.
+    for (auto [p, dxUnion] : {std::pair<double, double>{50.0, 0.01}, {10.0, 0.02}, {4.0, 0.04}}) {
+        for (auto [op, kind] : kOps) {
+            const double dx = p == 4.0 && op != ops::CsgOp::Union ? 0.02 : dxUnion;
+            auto a = sphere(ca, dx), b = sphere(cb, dx);
+            ops::BlendSettings s;
+            s.p = p;
+            std::vector<std::string> notes;
+            auto g = ops::blend(op, {a, b}, s, &notes);
+            ASSERT_EQ(notes.size(), 1u);
+            EXPECT_NE(notes[0].find("bands extended"), std::string::npos) << notes[0];
+            EXPECT_EQ(g->getName(), "surface");
+            EXPECT_EQ(g->getGridClass(), openvdb::GRID_LEVEL_SET);
+            EXPECT_FLOAT_EQ(g->background(), a->background());
 
-        const implicit::Blend exact(implicit::Csg::Op::Union, p,
-            {std::make_shared<implicit::Sphere>(ca, 0.6), std::make_shared<implicit::Sphere>(cb, 0.6)});
-        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(*g);
-        std::mt19937 rng(11);
-        std::normal_distribution<double> n(0.0, 1.0);
-        double worst = 0.0;
-        for (int i = 0; i < 1000; ++i) {
-            Vec3d d(n(rng), n(rng), n(rng));
-            d.normalize();
-            double lo = 0.0, hi = 2.0; // bisection for the surface along the ray from the origin
-            for (int k = 0; k < 60; ++k) {
-                const double mid = 0.5 * (lo + hi);
-                (exact.value(d * mid) < 0.0 ? lo : hi) = mid;
+            const implicit::Blend exact(kind, p, {std::make_shared<implicit::Sphere>(ca, 0.6),
+                                                  std::make_shared<implicit::Sphere>(cb, 0.6)});
+            openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(*g);
+            std::mt19937 rng(11);
+            std::normal_distribution<double> n(0.0, 1.0);
+            // Surface points by bisection along rays from a point inside the result: the
+            // origin (inside the union and the lens) or, for A minus B, A's far side.
+            const Vec3d from = op == ops::CsgOp::Difference ? Vec3d(-0.75, 0.0, 0.0) : Vec3d(0.0);
+            double worst = 0.0;
+            int used = 0;
+            for (int i = 0; i < 4000 && used < 1000; ++i) {
+                Vec3d d(n(rng), n(rng), n(rng));
+                d.normalize();
+                if (exact.value(from) >= 0.0) break;
+                double lo = 0.0, hi = 2.0;
+                if (exact.value(from + d * hi) <= 0.0) continue;
+                for (int k = 0; k < 60; ++k) {
+                    const double mid = 0.5 * (lo + hi);
+                    (exact.value(from + d * mid) < 0.0 ? lo : hi) = mid;
+                }
+                // Star-shaped from `from` along this ray: one crossing only (else skip the ray).
+                bool single = true;
+                for (int k = 1; k < 40 && single; ++k) {
+                    const double t = lo * k / 40.0;
+                    single = exact.value(from + d * t) < 0.0;
+                }
+                if (!single) continue;
+                ++used;
+                worst = std::max(worst, std::abs(double(sampler.wsSample(from + d * lo))) / dx);
             }
-            worst = std::max(worst, std::abs(double(sampler.wsSample(d * lo))) / dx);
+            size_t near = 0, unit = 0;
+            auto acc = g->getConstAccessor();
+            for (auto it = g->cbeginValueOn(); it; ++it) {
+                if (std::abs(*it) >= 1.5 * dx) continue;
+                ++near;
+                const double len = openvdb::math::ISGradient<openvdb::math::CD_2ND>::result(
+                                       acc, it.getCoord()).length() / dx;
+                if (len >= 0.9 && len <= 1.1) ++unit;
+            }
+            std::printf("grid blend %d p = %g (voxel %g): worst |phi| at %d analytic surface "
+                        "points %.4f voxel, |grad phi| in [0.9, 1.1] at %.2f%%\n",
+                        int(op), p, dx, used, worst, 100.0 * double(unit) / double(near));
+            EXPECT_GE(used, 1000) << "op " << int(op) << " p = " << p;
+            EXPECT_LT(worst, 0.25) << "op " << int(op) << " p = " << p;
+            EXPECT_GE(double(unit) / double(near), 0.95) << "op " << int(op) << " p = " << p;
         }
-        size_t near = 0, unit = 0;
-        auto acc = g->getConstAccessor();
-        for (auto it = g->cbeginValueOn(); it; ++it) {
-            if (std::abs(*it) >= 1.5 * dx) continue;
-            ++near;
-            const double len = openvdb::math::ISGradient<openvdb::math::CD_2ND>::result(
-                                   acc, it.getCoord()).length() / dx;
-            if (len >= 0.9 && len <= 1.1) ++unit;
-        }
-        std::printf("grid blend p = %g (voxel %g): worst |phi| at 1000 analytic surface points "
-                    "%.4f voxel, |grad phi| in [0.9, 1.1] at %.2f%%\n",
-                    p, dx, worst, 100.0 * double(unit) / double(near));
-        EXPECT_LT(worst, 0.25) << "p = " << p;
-        EXPECT_GE(double(unit) / double(near), 0.95) << "p = " << p;
     }
+}
+
+// The blend re-distances only around the crease; elsewhere it is the sharp operation. Far
+// apart inputs give exactly the sharp union, with a note.
+TEST_F(TestBlendGrid, EqualsSharpAwayFromTheCrease)
+{
+    const double dx = 0.02;
+    auto a = sphere(Vec3d(-0.7, 0, 0), dx), b = sphere(Vec3d(0.7, 0, 0), dx); // 0.2 apart
+    auto far = sphere(Vec3d(1.3, 0, 0), dx); // 1.4 apart
+    ops::BlendSettings s;
+    s.p = 200.0;
+    std::vector<std::string> notes;
+    for (const auto& other : {far, b}) {
+        notes.clear();
+        auto g = ops::blend(ops::CsgOp::Union, {a, other}, s, &notes);
+        ASSERT_EQ(notes.size(), 1u);
+        // Far apart, no leaf of one band comes within reach of the other: the sharp union.
+        // 0.2 apart, some do; every voxel is beyond the blend's reach (0.4 voxel at p = 200), so
+        // the re-distanced values near the gap stay within a small fraction of a voxel of it.
+        if (other == far) EXPECT_NE(notes[0].find("sharp operation"), std::string::npos) << notes[0];
+        auto sharp = ops::csg(ops::CsgOp::Union, {a, other});
+        EXPECT_EQ(g->activeVoxelCount(), sharp->activeVoxelCount());
+        auto acc = sharp->getConstAccessor();
+        double worst = 0.0;
+        for (auto it = g->cbeginValueOn(); it; ++it) {
+            worst = std::max(worst, double(std::abs(*it - acc.getValue(it.getCoord()))) / dx);
+        }
+        if (other == far) EXPECT_EQ(worst, 0.0);
+        else EXPECT_LT(worst, 0.05);
+    }
+
+    // Overlapping: voxels farther than the band plus the reach from B are A's own values.
+    auto c = sphere(Vec3d(0.35, 0, 0), dx);
+    notes.clear();
+    auto h = ops::blend(ops::CsgOp::Union, {a, c}, s, &notes);
+    EXPECT_NE(notes[0].find("bands extended"), std::string::npos) << notes[0];
+    auto aAcc = a->getConstAccessor();
+    size_t compared = 0;
+    for (auto it = h->cbeginValueOn(); it; ++it) {
+        const Vec3d x = h->indexToWorld(it.getCoord());
+        if ((x - Vec3d(0.35, 0, 0)).length() - 0.6 < 0.4) continue;
+        ++compared;
+        ASSERT_EQ(*it, aAcc.getValue(it.getCoord()));
+    }
+    EXPECT_GT(compared, 1000u);
 }
 
 TEST_F(TestBlendGrid, RefusesWhatDoesNotFitAndBadSettings)

@@ -40,7 +40,7 @@ int runBlend(const BlendOptions& opt)
                                  std::to_string(opt.inputs.size()));
     }
     io::checkOutputPath(opt.output);
-    std::vector<openvdb::FloatGrid::ConstPtr> grids;
+    std::vector<openvdb::FloatGrid::Ptr> grids;
     for (const std::string& path : opt.inputs) grids.push_back(readLevelSet(path, opt.grid));
     const auto t1 = std::chrono::steady_clock::now();
     ops::BlendSettings settings;
@@ -49,7 +49,7 @@ int runBlend(const BlendOptions& opt)
     Progress progress("blend");
     settings.interrupter = &progress;
     std::vector<std::string> notes;
-    auto result = ops::blend(csgOp(opt.op), grids, settings, &notes);
+    auto result = ops::blendInPlace(csgOp(opt.op), grids, settings, &notes);
     printNotes(notes);
     if (result->activeVoxelCount() == 0) {
         warn("the result has no surface (the inputs do not overlap as this operation needs); "
@@ -64,7 +64,7 @@ int runBlend(const BlendOptions& opt)
     if (!opt.quiet) {
         std::printf("blend %s p=%s of %zu level sets: %llu active voxels, read %.3f s, blend "
                     "%.3f s, total %.3f s -> %s\n",
-                    opt.op.c_str(), util::formatNumber(opt.p).c_str(), grids.size(),
+                    opt.op.c_str(), util::formatNumber(opt.p).c_str(), opt.inputs.size(),
                     (unsigned long long)result->activeVoxelCount(),
                     std::chrono::duration<double>(t1 - t0).count(),
                     std::chrono::duration<double>(t2 - t1).count(),

@@ -6,26 +6,110 @@
 #include <ivdb/util/System.h>
 
 #include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/Morphology.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/LeafManager.h>
 
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
 namespace ivdb::ops {
 
 namespace {
+
 using FloatTree = openvdb::FloatTree;
 using LeafT = FloatTree::LeafNodeType;
-} // namespace
+using MaskTree = openvdb::MaskTree;
+using openvdb::Coord;
 
-double blendReach(double p, double toleranceWorld)
+constexpr int kLeafLog2 = LeafT::LOG2DIM;
+constexpr int kLeafDim = LeafT::DIM;
+
+// Leaf nodes as the voxels of a coarse mask: voxel v stands for the leaf at origin v * 8. The
+// blend's regions are decided on this mask, which is 512 times smaller than the band.
+template<typename TreeT>
+MaskTree::Ptr leafMask(const TreeT& tree)
 {
-    return std::max(0.0, std::log(1.0 / (p * toleranceWorld)) / p);
+    auto mask = std::make_shared<MaskTree>();
+    for (auto it = tree.cbeginLeaf(); it; ++it) mask->setValueOn(it->origin() >> kLeafLog2);
+    return mask;
 }
 
-openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
-                              const BlendSettings& settings, std::vector<std::string>* notes)
+void dilateLeaves(MaskTree& mask, int steps) // steps voxels of the mask (leaves or voxels)
+{
+    if (steps <= 0) return;
+    openvdb::tools::dilateActiveValues(mask, steps, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::EXPAND_TILES);
+    mask.voxelizeActiveTiles();
+}
+
+MaskTree::Ptr dilatedCopy(const MaskTree& mask, int leaves)
+{
+    auto out = std::make_shared<MaskTree>(mask);
+    dilateLeaves(*out, leaves);
+    return out;
+}
+
+std::vector<Coord> leafOrigins(const MaskTree& mask)
+{
+    std::vector<Coord> out;
+    out.reserve(size_t(mask.activeVoxelCount()));
+    for (auto it = mask.cbeginValueOn(); it; ++it) {
+        const openvdb::CoordBBox box = it.getBoundingBox(); // a voxel, or a tile of them
+        for (auto c = box.begin(); c; ++c) out.push_back(*c << kLeafLog2);
+    }
+    return out;
+}
+
+int leavesFor(double voxels) { return int(std::ceil(voxels / kLeafDim)); }
+
+void checkInterrupt(openvdb::util::NullInterrupter* interrupter)
+{
+    if (interrupter && interrupter->wasInterrupted()) {
+        OPENVDB_THROW(openvdb::RuntimeError, "interrupted");
+    }
+}
+
+// The voxels of @a grid's band within @a keep (a voxel mask), extended by @a dilation voxels by
+// fast sweeping (openvdb::tools::dilateSdf). The leaves around are copied with their voxels
+// inactive, and leaf-sized tiles carry the inside sign, so the sweep sees on which side of the
+// surface each new voxel lies, as on the whole grid.
+openvdb::FloatGrid::Ptr extendLocally(const openvdb::FloatGrid& grid, const MaskTree& keep,
+                                      int dilation)
+{
+    auto clip = openvdb::FloatGrid::create(grid.background());
+    clip->setTransform(grid.transform().copy());
+    clip->setGridClass(openvdb::GRID_LEVEL_SET);
+    openvdb::tree::ValueAccessor<const FloatTree> acc(grid.tree());
+    openvdb::tree::ValueAccessor<const MaskTree> keepAcc(keep);
+    const MaskTree::Ptr around = dilatedCopy(*leafMask(keep), leavesFor(dilation) + 1);
+    for (const Coord& o : leafOrigins(*around)) {
+        if (const LeafT* leaf = acc.probeConstLeaf(o)) {
+            auto* copy = new LeafT(*leaf);
+            const MaskTree::LeafNodeType* k = keepAcc.probeConstLeaf(o);
+            copy->setValueMask(k ? leaf->getValueMask() & k->getValueMask()
+                                 : LeafT::NodeMaskType());
+            clip->tree().addLeaf(copy);
+        } else if (acc.getValue(o) < 0.0f) {
+            clip->tree().addTile(1, o, -grid.background(), false);
+        }
+    }
+    if (dilation <= 0 || clip->tree().activeVoxelCount() == 0) return clip;
+    return openvdb::tools::dilateSdf(*clip, dilation, openvdb::tools::NN_FACE_EDGE_VERTEX);
+}
+
+implicit::Csg::Op implicitOp(CsgOp op)
+{
+    return op == CsgOp::Union          ? implicit::Csg::Op::Union
+         : op == CsgOp::Intersection ? implicit::Csg::Op::Intersection
+                                      : implicit::Csg::Op::Difference;
+}
+
+void checkSettings(size_t inputs, const BlendSettings& settings)
 {
     const double p = settings.p;
     if (!(p >= 0.1 && p <= 1000.0)) {
@@ -36,13 +120,23 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
         OPENVDB_THROW(openvdb::ValueError, "blend tolerance must be > 0 voxels, got " +
                                                util::formatNumber(settings.tolerance));
     }
-    if (inputs.size() < 2) {
-        OPENVDB_THROW(openvdb::ValueError, "a blend needs at least two level sets, got " +
-                                               std::to_string(inputs.size()));
+    if (inputs < 2) {
+        OPENVDB_THROW(openvdb::ValueError,
+                      "a blend needs at least two level sets, got " + std::to_string(inputs));
     }
-    const openvdb::math::Transform& target = finestInput(inputs).transform();
-    const double dx = target.voxelSize()[0];
-    const double halfWidth = double(inputs[0]->background()) / dx; // the output's, in voxels
+}
+
+// The blend of level sets already on one transform; consumes @a grids (the sharp operation
+// steals their nodes).
+openvdb::FloatGrid::Ptr blendOnTarget(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                                      const BlendSettings& settings, std::vector<std::string>* notes)
+{
+    const double p = settings.p;
+    const openvdb::FloatGrid& finest = finestInput(grids);
+    const double dx = finest.voxelSize()[0];
+    const float bg = finest.background(); // the output's, as for the sharp operation
+    const double halfWidth = double(bg) / dx;
+    const size_t n = grids.size();
 
     // How many voxels each band must reach: the output band plus the blend's reach.
     const double reachVox = blendReach(p, settings.tolerance * dx) / dx;
@@ -53,90 +147,196 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
             "...} in a scene file, which needs no band extension), a larger p, or a larger "
             "--tolerance");
     }
-    const int needVox = int(std::ceil(halfWidth + reachVox)) + 1;
-
-    std::vector<openvdb::FloatGrid::Ptr> grids;
-    std::vector<int> dilation;
-    double estimate = 0.0;
-    for (const auto& in : inputs) {
-        grids.push_back(matchTransform(*in, target, notes));
-        const double w = double(grids.back()->background()) / dx;
-        const int d = std::max(0, needVox - int(std::floor(w)));
-        dilation.push_back(d);
-        // The grown band lies within the active bounding box grown by d voxels (it fills most of
-        // it once d is comparable to the shape); the sweep keeps a few copies of it (values,
-        // masks, slices): about 16 bytes a voxel.
-        const openvdb::Coord dim = grids.back()->evalActiveVoxelDim();
-        estimate += double(dim.x() + 2 * d) * double(dim.y() + 2 * d) * double(dim.z() + 2 * d) * 16.0;
+    // (The swell ln(n)/p of the blended surface too; see the lead rule below.)
+    const int needVox = int(std::ceil(halfWidth + reachVox + std::log(double(n)) / p / dx)) + 1;
+    std::vector<int> dilation(n);
+    std::vector<MaskTree::Ptr> leaves(n);
+    for (size_t i = 0; i < n; ++i) {
+        dilation[i] = std::max(0, needVox - int(std::floor(double(grids[i]->background()) / dx)));
+        leaves[i] = leafMask(grids[i]->tree());
     }
+
+    auto refuse = [&](double estimate, double limit) {
+        std::ostringstream os;
+        os << "blend with p = " << util::formatNumber(p) << " reaches " << std::ceil(reachVox)
+           << " voxels beyond the surfaces, so the bands must grow to " << needVox
+           << " voxels where the inputs meet: about " << util::formatBytes(estimate)
+           << ", more than the " << util::formatBytes(limit) << " available. Use the scene-level "
+           << "blend ({\"type\": \"blend\", ...} in a scene file, which needs no band extension), "
+           << "a larger p, or a larger --tolerance";
+        OPENVDB_THROW(openvdb::RuntimeError, os.str());
+    };
     const double available = double(util::availableMemory()); // 0 when unknown
     const double limit = settings.memoryLimit ? double(settings.memoryLimit)
                        : available > 0.0      ? 0.8 * available
                                               : 1e18;
-    if (estimate > limit) {
-        std::ostringstream os;
-        os << "blend with p = " << util::formatNumber(p) << " reaches " << std::ceil(reachVox)
-           << " voxels beyond the surfaces, so each band must grow to " << needVox
-           << " voxels: about " << util::formatBytes(estimate) << ", more than the "
-           << util::formatBytes(limit) << " available. Use the scene-level blend ({\"type\": "
-           << "\"blend\", ...} in a scene file, which needs no band extension), a larger p, or a "
-           << "larger --tolerance";
-        OPENVDB_THROW(openvdb::RuntimeError, os.str());
+    // The sweep keeps a few copies of the grown band (values, masks, slices): about 16 bytes a
+    // voxel. A first bound, before any mask is grown: each input's whole band grown by its
+    // extension, or its bounding box so grown, whichever is smaller.
+    auto grownBytes = [&](const MaskTree& mask, int d) {
+        openvdb::CoordBBox box;
+        mask.evalActiveVoxelBoundingBox(box);
+        const double k = 2.0 * leavesFor(d) + 1.0;
+        const double byLeaves = double(mask.activeVoxelCount()) * k * k * k;
+        const openvdb::Coord dim = box.dim();
+        const double byBox = (dim.x() + k - 1.0) * (dim.y() + k - 1.0) * (dim.z() + k - 1.0);
+        return std::min(byLeaves, byBox) * double(LeafT::SIZE) * 16.0;
+    };
+    {
+        double estimate = 0.0;
+        for (size_t i = 0; i < n; ++i) estimate += grownBytes(*leaves[i], dilation[i]);
+        if (estimate > limit) refuse(estimate, limit);
+    }
+
+    // Where the blend differs from the sharp operation by more than the tolerance, two inputs are
+    // within needVox of their surfaces: the crease. First in leaves (a leaf of one input's band
+    // within reach of a leaf of another's), then in voxels within those leaves.
+    auto pairwise = [n](const std::vector<MaskTree::Ptr>& masks) {
+        auto out = std::make_shared<MaskTree>();
+        for (size_t i = 0; i < n; ++i) {
+            for (size_t j = i + 1; j < n; ++j) {
+                MaskTree both(*masks[i]);
+                both.topologyIntersection(*masks[j]);
+                out->topologyUnion(both);
+            }
+        }
+        return out;
+    };
+    MaskTree::Ptr creasePtr;
+    {
+        std::vector<MaskTree::Ptr> reach(n);
+        for (size_t i = 0; i < n; ++i) reach[i] = dilatedCopy(*leaves[i], leavesFor(dilation[i]));
+        const MaskTree::Ptr candidates = pairwise(reach);
+        for (size_t i = 0; i < n; ++i) {
+            // The band's voxels in the leaves that can reach a candidate, grown by the extension.
+            auto band = std::make_shared<MaskTree>();
+            openvdb::tree::ValueAccessor<const FloatTree> acc(grids[i]->tree());
+            const MaskTree::Ptr near = dilatedCopy(*candidates, leavesFor(dilation[i]));
+            for (const Coord& o : leafOrigins(*near)) {
+                if (const LeafT* leaf = acc.probeConstLeaf(o)) {
+                    band->touchLeaf(o)->setValueMask(leaf->getValueMask());
+                }
+            }
+            dilateLeaves(*band, dilation[i]);
+            reach[i] = band;
+        }
+        creasePtr = pairwise(reach);
+    }
+    const MaskTree& crease = *creasePtr;
+    const bool hasCrease = crease.activeVoxelCount() > 0;
+    checkInterrupt(settings.interrupter);
+
+    // The rest of the blend is the sharp operation (OpenVDB's csg tools), so only the crease
+    // needs grown bands and re-distancing. Its re-distancing reads the surface within a band
+    // width of the crease: the region around it.
+    const MaskTree::Ptr regionPtr = dilatedCopy(crease, int(std::ceil(halfWidth)) + 2);
+    const MaskTree& region = *regionPtr;
+    std::vector<openvdb::FloatGrid::Ptr> grown(n);
+    if (hasCrease) {
+        double estimate = 0.0;
+        std::vector<MaskTree::Ptr> keep(n);
+        for (size_t i = 0; i < n; ++i) {
+            keep[i] = dilatedCopy(crease, dilation[i] + 1);
+            estimate += grownBytes(*leafMask(*keep[i]), dilation[i]);
+        }
+        if (estimate > limit) refuse(estimate, limit);
+        for (size_t i = 0; i < n; ++i) {
+            grown[i] = extendLocally(*grids[i], *keep[i], dilation[i]);
+            checkInterrupt(settings.interrupter);
+        }
     }
     if (notes) {
         std::ostringstream os;
-        os << "bands extended to " << needVox << " voxels for p = " << util::formatNumber(p)
-           << " (reach " << util::formatNumber(std::round(reachVox * 10) / 10) << " voxels)";
+        if (!hasCrease) {
+            os << "the inputs do not come within the blend's reach of each other (p = "
+               << util::formatNumber(p) << "): the result is the sharp operation";
+        } else {
+            os << "bands extended to " << needVox << " voxels where the inputs meet, for p = "
+               << util::formatNumber(p) << " (reach "
+               << util::formatNumber(std::round(reachVox * 10) / 10) << " voxels; "
+               << util::formatNumber(double(region.activeVoxelCount()))
+               << " voxels around the crease re-distanced)";
+        }
         notes->push_back(os.str());
     }
-    for (size_t i = 0; i < grids.size(); ++i) {
-        if (dilation[i] > 0) {
-            grids[i] = openvdb::tools::dilateSdf(*grids[i], dilation[i],
-                                                 openvdb::tools::NN_FACE_EDGE_VERTEX);
-        }
-        if (settings.interrupter && settings.interrupter->wasInterrupted()) {
-            OPENVDB_THROW(openvdb::RuntimeError, "interrupted");
-        }
-    }
 
-    // Combine over the union of the extended topologies. Outside an extended band an input
-    // counts as +/- its extended half width, beyond the blend's reach.
+    // The blended values over the region, from the grown bands; outside a grown band an input
+    // counts as +/- the extended half width (beyond the blend's reach), by its sign.
+    //
+    // Which voxels keep the sharp value: take a union (an intersection is the union of the
+    // complements) and the deciding term s = min t_i, with the next term s + g. The blended
+    // surface leaves the sharp one only where two terms are within the reach R of each other and
+    // the surface has swollen by at most ln(n)/p: there every term is below R + ln(n)/p. From a
+    // voxel outside (s >= 0) those points are at least s + g - R - ln(n)/p away, so the sharp
+    // value s is the distance if g >= R + ln(n)/p. From inside (s < 0), the nearest sharp
+    // surface point (|s| away) is in the swollen part only if g < R + ln(n)/p + 2|s|. So a voxel
+    // whose lead g exceeds R + ln(n)/p + 2 max(0, -s) (plus a voxel) keeps the sharp value;
+    // the others are marked as blended and get re-distanced values.
     const float clamp = float(needVox * dx);
+    const double lead = blendReach(p, settings.tolerance * dx) + std::log(double(n)) / p + dx;
+    MaskTree blended;
+    openvdb::FloatGrid::Ptr redistanced;
     auto combined = openvdb::FloatGrid::create(clamp);
-    combined->setTransform(target.copy());
-    for (const auto& g : grids) combined->tree().topologyUnion(g->tree());
-    combined->tree().voxelizeActiveTiles();
-    {
-        const implicit::Csg::Op kind = op == CsgOp::Union ? implicit::Csg::Op::Union
-                                     : op == CsgOp::Intersection ? implicit::Csg::Op::Intersection
-                                                                 : implicit::Csg::Op::Difference;
-        openvdb::tree::LeafManager<FloatTree> leaves(combined->tree());
-        leaves.foreach([&](LeafT& leaf, size_t) {
-            std::vector<openvdb::tree::ValueAccessor<const FloatTree>> acc;
-            for (const auto& g : grids) acc.emplace_back(g->tree());
-            std::vector<double> t(grids.size());
-            for (auto it = leaf.beginValueOn(); it; ++it) {
-                const openvdb::Coord ijk = it.getCoord();
-                for (size_t i = 0; i < grids.size(); ++i) {
-                    float v;
-                    if (!acc[i].probeValue(ijk, v)) v = v > 0.0f ? clamp : -clamp;
-                    v = std::max(-clamp, std::min(clamp, v));
-                    t[i] = (kind == implicit::Csg::Op::Difference && i > 0) ? -double(v) : double(v);
+    if (hasCrease) {
+        combined->setTransform(finest.transform().copy());
+        std::vector<const MaskTree::LeafNodeType*> in;
+        for (auto it = region.cbeginLeaf(); it; ++it) in.push_back(it.getLeaf());
+        std::vector<LeafT*> out(in.size());
+        std::vector<MaskTree::LeafNodeType*> marks(in.size());
+        for (size_t k = 0; k < in.size(); ++k) {
+            out[k] = combined->tree().touchLeaf(in[k]->origin());
+            marks[k] = blended.touchLeaf(in[k]->origin());
+        }
+        const implicit::Csg::Op kind = implicitOp(op);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, in.size()),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            std::vector<openvdb::tree::ValueAccessor<const FloatTree>> ext, orig;
+            for (size_t i = 0; i < n; ++i) {
+                ext.emplace_back(grown[i]->tree());
+                orig.emplace_back(grids[i]->tree());
+            }
+            std::vector<double> t(n);
+            std::vector<char> reached(n);
+            const double sign = kind == implicit::Csg::Op::Union ? 1.0 : -1.0;
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                LeafT& leaf = *out[k];
+                MaskTree::LeafNodeType& mark = *marks[k];
+                for (openvdb::Index m = 0; m < LeafT::SIZE; ++m) {
+                    const Coord ijk = leaf.offsetToGlobalCoord(m);
+                    for (size_t i = 0; i < n; ++i) {
+                        float v;
+                        if (!ext[i].probeValue(ijk, v)) v = orig[i].getValue(ijk) > 0.0f ? clamp : -clamp;
+                        reached[i] = std::abs(v) < clamp;
+                        v = std::max(-clamp, std::min(clamp, v));
+                        t[i] = (kind == implicit::Csg::Op::Difference && i > 0) ? -double(v) : double(v);
+                    }
+                    const float f = float(implicit::blendTerms(kind, p, t.data(), n));
+                    if (!in[k]->isValueOn(m)) { // outside the region: its sign only
+                        leaf.setValueOff(m, f > 0.0f ? clamp : -clamp);
+                        continue;
+                    }
+                    leaf.setValueOn(m, f);
+                    // The lead of the deciding term over the next; a term beyond its grown band
+                    // is beyond the blend's reach, however near it looks after clamping.
+                    double first = 1e30, second = 1e30;
+                    for (size_t i = 0; i < n; ++i) {
+                        const double v = reached[i] ? sign * t[i] : 1e30;
+                        if (v < first) second = first, first = v;
+                        else if (v < second) second = v;
+                    }
+                    if (second < 1e30 && second - first < lead + 2.0 * std::max(0.0, -first)) {
+                        mark.setValueOn(m); // two terms within reach, the second close enough
+                    }
                 }
-                it.setValue(float(implicit::blendTerms(kind, p, t.data(), t.size())));
             }
         });
-    }
-    // Tiles inside the shapes took the positive background from topologyUnion: give every
-    // inactive region its sign from the band, or the inner edge of the extended band would look
-    // like a surface.
-    openvdb::tools::signedFloodFill(combined->tree());
-    // The blend is not a distance (|grad f| < 1 near the crease): estimate f / |grad f|.
-    combined->setGridClass(openvdb::GRID_LEVEL_SET);
-    const auto grad = diff::gradient(*combined, 1);
-    {
-        openvdb::tree::LeafManager<FloatTree> leaves(combined->tree());
-        leaves.foreach([&](LeafT& leaf, size_t) {
+        grown.clear();
+        openvdb::tools::signedFloodFill(combined->tree());
+        // The blend is not a distance (|grad f| < 1 near the crease): estimate f / |grad f|.
+        combined->setGridClass(openvdb::GRID_LEVEL_SET);
+        const auto grad = diff::gradient(*combined, 1);
+        openvdb::tree::LeafManager<FloatTree> manager(combined->tree());
+        manager.foreach([&](LeafT& leaf, size_t) {
             const auto* g = grad->tree().probeConstLeaf(leaf.origin());
             if (!g) return;
             for (auto it = leaf.beginValueOn(); it; ++it) {
@@ -145,12 +345,71 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
                 it.setValue(float(std::max(-double(clamp), std::min(double(clamp), e))));
             }
         });
+        checkInterrupt(settings.interrupter);
+        auto samples = combined->deepCopy();
+        redistanced = levelset::redistance(*samples, halfWidth, settings.interrupter);
     }
-    auto out = levelset::redistance(*combined, halfWidth, settings.interrupter);
-    out->setTransform(target.copy());
-    out->setGridClass(openvdb::GRID_LEVEL_SET);
-    out->setName("surface");
-    return out;
+
+    // The sharp operation everywhere, then the re-distanced blend over the crease.
+    openvdb::FloatGrid::Ptr result = csgInPlace(op, grids, nullptr);
+    if (hasCrease) {
+        std::vector<LeafT*> out;
+        for (auto it = blended.cbeginLeaf(); it; ++it) {
+            if (!it->isEmpty()) out.push_back(result->tree().touchLeaf(it->origin()));
+        }
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, out.size()),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                LeafT& leaf = *out[k];
+                const LeafT* d = redistanced->tree().probeConstLeaf(leaf.origin());
+                const LeafT* f = combined->tree().probeConstLeaf(leaf.origin());
+                const MaskTree::LeafNodeType* mark = blended.probeConstLeaf(leaf.origin());
+                for (openvdb::Index m = 0; m < LeafT::SIZE; ++m) {
+                    if (!mark->isValueOn(m)) continue;
+                    const float v = d ? d->getValue(m) : bg;
+                    if (d && d->isValueOn(m) && std::abs(v) < bg) {
+                        leaf.setValueOn(m, v);
+                    } else {
+                        const float s = f ? f->getValue(m) : v;
+                        leaf.setValueOff(m, s > 0.0f ? bg : -bg);
+                    }
+                }
+            }
+        });
+        openvdb::tools::pruneLevelSet(result->tree());
+    }
+    result->setGridClass(openvdb::GRID_LEVEL_SET);
+    result->setName("surface");
+    return result;
+}
+
+} // namespace
+
+double blendReach(double p, double toleranceWorld)
+{
+    return std::max(0.0, std::log(1.0 / (p * toleranceWorld)) / p);
+}
+
+openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
+                              const BlendSettings& settings, std::vector<std::string>* notes)
+{
+    checkSettings(inputs.size(), settings);
+    const openvdb::math::Transform& target = finestInput(inputs).transform();
+    std::vector<openvdb::FloatGrid::Ptr> grids;
+    for (const auto& in : inputs) grids.push_back(matchTransform(*in, target, notes));
+    return blendOnTarget(op, grids, settings, notes);
+}
+
+openvdb::FloatGrid::Ptr blendInPlace(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& inputs,
+                                     const BlendSettings& settings, std::vector<std::string>* notes)
+{
+    checkSettings(inputs.size(), settings);
+    const openvdb::math::Transform target = finestInput(inputs).transform();
+    std::vector<openvdb::FloatGrid::Ptr> grids;
+    for (const auto& in : inputs) {
+        grids.push_back(in->transform() == target ? in : matchTransform(*in, target, notes));
+    }
+    return blendOnTarget(op, grids, settings, notes);
 }
 
 } // namespace ivdb::ops

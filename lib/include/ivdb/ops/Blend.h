@@ -25,17 +25,25 @@ struct BlendSettings
 double blendReach(double p, double toleranceWorld);
 
 /// @brief Super-elliptic blended CSG of level sets (seed eqs. 12-15) on grids.
-/// @details Inputs are resampled onto the finest one (as csg()). Each input's narrow band is
-/// first extended by fast sweeping (openvdb::tools::dilateSdf) as far as blendReach() asks, so
-/// the blend does not read clamped background values near the other surface; the values are
-/// combined over the union of the extended topologies with the same log-sum-exp as the
-/// scene-level blend, estimated as distances f / |grad f| and re-distanced into a narrow band of
-/// the first input's half width (levelset::redistance).
-/// @throw openvdb::ValueError for a bad p or fewer than two inputs
+/// @details Inputs are resampled onto the finest one (as csg()). The blend differs from the sharp
+/// operation by more than the tolerance only where two inputs are within blendReach() of each
+/// other near the output band: the crease. So the result is the sharp operation (OpenVDB's csg
+/// tools, as csg()) everywhere except around the crease, found on a mask with one voxel per leaf
+/// node: there each input's band is extended by fast sweeping (openvdb::tools::dilateSdf) on a
+/// clipped copy, the values are combined with the same log-sum-exp as the scene-level blend,
+/// estimated as distances f / |grad f| and re-distanced (levelset::redistance) into a narrow band
+/// of the finest input's half width. The cost grows with the crease, not with the band.
+/// @throw openvdb::ValueError for a bad p or tolerance, or fewer than two inputs
 /// @throw openvdb::RuntimeError if the extension would not fit in memory (the message suggests
 /// the scene-level blend), or on interruption
 openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
                               const BlendSettings& settings,
                               std::vector<std::string>* notes = nullptr);
+
+/// @brief blend() that consumes its inputs (the sharp part steals their nodes, as csgInPlace()):
+/// for callers that do not need the inputs afterwards (the CLI).
+openvdb::FloatGrid::Ptr blendInPlace(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& inputs,
+                                     const BlendSettings& settings,
+                                     std::vector<std::string>* notes = nullptr);
 
 } // namespace ivdb::ops
