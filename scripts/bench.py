@@ -19,6 +19,7 @@ Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|all] [-
 """
 import argparse
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -98,8 +99,12 @@ def bench_csg(tmp, big, reps):
     print("|---|---|---|---|")
     print(f"| csg union (radius {big}) vs tools::csgUnion | {ours:.1f} ms | {ref:.1f} ms | "
           f"**{ours / ref:.2f}x the time** |")
-    # p = 1000: 2-voxel band extension at radius 100, 3 at 400; p = 0.8 * radius: 6 voxels.
-    for r, p, ext in ((100, 1000, 2), (big, 1000, 3), (100, 80, 6), (big, int(0.8 * big), 6)):
+    # p = 1000: a 2-voxel band extension at radius 100 and 200, 3 at 400; p = 0.8 * radius: 6.
+    def extension(r, p):  # as ops::blend: ceil(w + reach + ln(2)/p) + 1 - w voxels, w = 3
+        reach = max(0.0, math.log(1.0 / (p * 0.05 / r)) / p) * r + math.log(2.0) / p * r
+        return math.ceil(3.0 + reach) + 1 - 3
+    for r, p in ((100, 1000), (big, 1000), (100, 80), (big, int(0.8 * big))):
+        ext = extension(r, p)
         blend, sharp = med[f"BM_BlendUnion/{r}/{p}/real_time"], med[f"BM_CsgUnion/{r}/real_time"]
         print(f"| blend union p = {p}, {ext}-voxel band extension (radius {r}) vs sharp csg union | "
               f"{blend:.0f} ms | {sharp:.1f} ms | **{blend / sharp:.0f}x the time** |")

@@ -8,6 +8,7 @@
 
 #include <openvdb/math/Operators.h>
 #include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/Composite.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
 #include <gtest/gtest.h>
@@ -402,4 +403,73 @@ TEST_F(TestRasterize, ExtremeHalfWidths)
     }
     EXPECT_GT(hi, 0.19f);
     EXPECT_LT(lo, -0.19f);
+}
+
+// "distance": "bound": a union of spheres stores min of the exact distances as it is, which is
+// what OpenVDB's createLevelSetSphere + csgUnion give; sparse equals dense; anything that is not
+// a CSG of exact distances is refused.
+TEST_F(TestRasterize, DistanceBoundStoresCsgOfDistances)
+{
+    const double dx = 1.0 / 64.0;
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> pos(-0.5, 0.5), rad(0.1, 0.3);
+    std::vector<Implicit::Ptr> spheres;
+    std::vector<std::pair<Vec3d, double>> params;
+    for (int i = 0; i < 12; ++i) {
+        // Centres and radii on the voxel lattice's binary fractions: no rounding ties.
+        const Vec3d c(std::round(pos(rng) * 64) / 64, std::round(pos(rng) * 64) / 64,
+                      std::round(pos(rng) * 64) / 64);
+        const double r = std::round(rad(rng) * 64) / 64;
+        spheres.push_back(std::make_shared<implicit::Sphere>(c, r));
+        params.emplace_back(c, r);
+    }
+    auto u = std::make_shared<implicit::Csg>(implicit::Csg::Op::Union, spheres);
+    raster::RasterSettings s = settings(dx);
+    s.distance = raster::Distance::Bound;
+    auto ours = raster::rasterize(u, s);
+
+    // Closed form: every active voxel holds min of the distances; every voxel with |min| below
+    // the band is active.
+    size_t checked = 0;
+    for (auto it = ours->cbeginValueOn(); it; ++it) {
+        const Vec3d p = ours->indexToWorld(it.getCoord());
+        double d = 1e9;
+        for (const auto& [c, r] : params) d = std::min(d, (p - c).length() - r);
+        ASSERT_NEAR(*it, d, 1e-6);
+        ++checked;
+    }
+    EXPECT_GT(checked, 10000u);
+
+    // OpenVDB's route: createLevelSetSphere per sphere, csgUnion; where both have a band voxel
+    // the values agree.
+    openvdb::FloatGrid::Ptr ref;
+    for (const auto& [c, r] : params) {
+        auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+            float(r), openvdb::Vec3f(c), float(dx), 3.0f);
+        if (!ref) ref = g;
+        else openvdb::tools::csgUnion(*ref, *g);
+    }
+    auto refAcc = ref->getConstAccessor();
+    size_t both = 0;
+    for (auto it = ours->cbeginValueOn(); it; ++it) {
+        float v;
+        if (!refAcc.probeValue(it.getCoord(), v)) continue;
+        ++both;
+        ASSERT_NEAR(*it, v, 1e-6);
+    }
+    EXPECT_GT(double(both), 0.95 * double(ours->activeVoxelCount()));
+
+    s.sampling = raster::Sampling::Dense;
+    expectSameBand(*ours, *raster::rasterize(u, s), 0.0f, "bound: sparse vs dense");
+
+    // A quadric is not a distance: refused, with the fix named.
+    s.sampling = raster::Sampling::Sparse;
+    auto withQuadric = std::make_shared<implicit::Csg>(implicit::Csg::Op::Union,
+        std::vector<Implicit::Ptr>{spheres[0], implicit::makeEllipsoid(Vec3d(0.0), Vec3d(0.3, 0.2, 0.1))});
+    try {
+        raster::rasterize(withQuadric, s);
+        FAIL() << "a quadric with distance bound must be refused";
+    } catch (const openvdb::ValueError& e) {
+        EXPECT_NE(std::string(e.what()).find("remove \"distance\""), std::string::npos) << e.what();
+    }
 }

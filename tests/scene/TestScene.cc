@@ -335,6 +335,14 @@ TEST_F(TestScene, TopLevelFields)
     EXPECT_NEAR(s.shape->value(Vec3d(0, 0, 0.25)), 0.25, kTol);
     EXPECT_NEAR(parseScene(R"({"half_width": 1, "shape": {"type": "sphere", "radius": 1}})", "s")
                     .halfWidth, 1.0, 0.0);
+    // "distance": "exact" (the default) or "bound"
+    EXPECT_FALSE(s.distanceBound);
+    EXPECT_TRUE(parseScene(R"({"distance": "bound", "shape": {"type": "sphere", "radius": 1}})", "s")
+                    .distanceBound);
+    EXPECT_FALSE(parseScene(R"({"distance": "exact", "shape": {"type": "sphere", "radius": 1}})", "s")
+                     .distanceBound);
+    expectMentions(errorOf(R"({"distance": "approx", "shape": {"type": "sphere", "radius": 1}})"),
+                   {"distance", "\"approx\"", "bound"});
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -255,10 +255,10 @@ void BM_BlendUnion(benchmark::State& state)
 
 } // namespace
 
-BENCHMARK(BM_CsgUnion)->Arg(100)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_OpenVDB_CsgUnion)->Arg(100)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_BlendUnion)->Args({100, 1000})->Args({400, 1000})->Args({100, 80})
-    ->Args({400, 320})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_CsgUnion)->Arg(100)->Arg(200)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_OpenVDB_CsgUnion)->Arg(100)->Arg(200)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_BlendUnion)->Args({100, 1000})->Args({200, 1000})->Args({400, 1000})->Args({100, 80})
+    ->Args({200, 160})->Args({400, 320})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_GradientAlternating)->Arg(400)->Iterations(6)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Gradient)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OpenVDB_Gradient)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -93,6 +93,7 @@ raster::RasterSettings sceneSettings(const scene::Scene& sc, const std::string& 
         settings.halfWidth = *halfWidth;
     }
     settings.bounds = sc.bounds;
+    settings.distance = sc.distanceBound ? raster::Distance::Bound : raster::Distance::Exact;
     return settings;
 }
 
@@ -151,6 +152,7 @@ int run(int argc, char** argv)
         addCompareGradient(app, action);
         addCsg(app, action);
         addBlend(app, action);
+        addBench(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {
             const std::string a = argv[i];
@@ -159,7 +161,7 @@ int run(int argc, char** argv)
             const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
             if (subs.empty()) {
                 std::cerr << "ivdb: error: unknown command '" << a
-                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend (run 'ivdb --help')" << std::endl;
+                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, bench (run 'ivdb --help')" << std::endl;
                 return 2;
             }
             break;

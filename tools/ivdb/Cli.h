@@ -34,6 +34,7 @@ void addCurvature(CLI::App& app, Action& action);
 void addCompareGradient(CLI::App& app, Action& action);
 void addCsg(CLI::App& app, Action& action);
 void addBlend(CLI::App& app, Action& action);
+void addBench(CLI::App& app, Action& action);
 /// @}
 
 /// @brief Rasterizer settings from a scene and the command line's --voxel-size and --half-width.

@@ -25,6 +25,7 @@ struct RasterizeOptions
     std::string scene, output;
     std::optional<double> voxelSize, halfWidth;
     std::string sampling = "sparse";
+    std::string distance; // empty: the scene's
     bool quiet = false;
 };
 
@@ -36,6 +37,9 @@ int runRasterize(const RasterizeOptions& opt)
 
     raster::RasterSettings settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
     settings.sampling = opt.sampling == "dense" ? raster::Sampling::Dense : raster::Sampling::Sparse;
+    if (!opt.distance.empty()) {
+        settings.distance = opt.distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
+    }
     Progress progress("rasterize " + opt.scene);
     settings.interrupter = &progress;
 
@@ -96,6 +100,12 @@ void addRasterize(CLI::App& app, Action& action)
                     "of the bounding box (the reference; refuses if it would not fit in memory)")
         ->check(CLI::IsMember({"sparse", "dense"}))
         ->capture_default_str();
+    cmd->add_option("--distance", opt->distance,
+                    "exact: true signed distances (shapes that are not distances are "
+                    "re-distanced); bound: a CSG of exact distances stored as min / max, as "
+                    "OpenVDB's csg tools give it, without re-distancing (overrides the scene's "
+                    "\"distance\", default exact)")
+        ->check(CLI::IsMember({"exact", "bound"}));
     cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
     cmd->callback([&action, opt]() { action = [opt]() { return runRasterize(*opt); }; });
 }

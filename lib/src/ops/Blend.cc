@@ -14,6 +14,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <limits>
 #include <cmath>
 #include <sstream>
 
@@ -74,11 +75,149 @@ void checkInterrupt(openvdb::util::NullInterrupter* interrupter)
     }
 }
 
-// The voxels of @a grid's band within @a keep (a voxel mask), extended by @a dilation voxels by
-// fast sweeping (openvdb::tools::dilateSdf). The leaves around are copied with their voxels
+// The voxels of @a grid's band within @a keep (a voxel mask), extended by @a dilation voxels
+// within @a keep by closest-point propagation. Every band voxel x gets its surface point
+// c = x - phi(x) n and normal n = grad(phi)(x) / |grad(phi)(x)| (central differences, one-sided
+// at the band's edge). Then, one layer of voxels at a time, each new voxel y takes the neighbour
+// (of 26) whose point c is nearest, and the distance to that point's tangent plane,
+// (y - c) . n, passing the same point and normal on (they stay the seeds' own). The plane
+// keeps the error second order in the angle between neighbours' normals (the distance to c
+// itself is off by about spacing^2 / (2 distance) on the concave side). The sign comes from the
+// input, which holds it beyond the band. openvdb::tools::dilateSdf (fast sweeping) took about
+// 1.3 us a voxel on this job; this is several times cheaper.
+openvdb::FloatGrid::Ptr extendByClosestPoints(const openvdb::FloatGrid& grid, const MaskTree& keep,
+                                             int dilation)
+{
+    using Vec3fTree = openvdb::Vec3STree;
+    using CpLeaf = Vec3fTree::LeafNodeType;
+    const double dx = grid.voxelSize()[0];
+    auto ext = openvdb::FloatGrid::create(grid.background());
+    ext->setTransform(grid.transform().copy());
+    ext->setGridClass(openvdb::GRID_LEVEL_SET);
+    Vec3fTree cps(openvdb::Vec3s(0.0f)), normals(openvdb::Vec3s(0.0f));
+    MaskTree known; // voxels with a value and a closest point, in index space
+    {
+        openvdb::tree::ValueAccessor<const FloatTree> acc(grid.tree());
+        for (auto it = keep.cbeginLeaf(); it; ++it) {
+            const LeafT* leaf = acc.probeConstLeaf(it->origin());
+            if (!leaf) continue;
+            auto* copy = new LeafT(*leaf);
+            copy->setValueMask(leaf->getValueMask() & it->getValueMask());
+            if (copy->isEmpty()) {
+                delete copy;
+                continue;
+            }
+            ext->tree().addLeaf(copy);
+            cps.touchLeaf(it->origin());
+            normals.touchLeaf(it->origin());
+            known.touchLeaf(it->origin())->setValueMask(copy->getValueMask());
+        }
+    }
+    // The seeds' closest points (each leaf by one thread; reads of the input only).
+    {
+        std::vector<LeafT*> leaves;
+        ext->tree().getNodes(leaves);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            openvdb::tree::ValueAccessor<const FloatTree> acc(grid.tree());
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                const LeafT& leaf = *leaves[k];
+                CpLeaf* cp = cps.probeLeaf(leaf.origin());
+                CpLeaf* nrm = normals.probeLeaf(leaf.origin());
+                for (auto it = leaf.cbeginValueOn(); it; ++it) {
+                    const Coord ijk = it.getCoord();
+                    float v0;
+                    acc.probeValue(ijk, v0);
+                    openvdb::Vec3d g;
+                    for (int a = 0; a < 3; ++a) {
+                        Coord dp = ijk, dm = ijk;
+                        dp[a] += 1;
+                        dm[a] -= 1;
+                        float vp, vm;
+                        const bool p = acc.probeValue(dp, vp), m = acc.probeValue(dm, vm);
+                        g[a] = p && m ? 0.5 * (double(vp) - vm) : p ? double(vp) - v0
+                             : m      ? double(v0) - vm           : 0.0;
+                    }
+                    const double len = g.length();
+                    const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
+                    const openvdb::Vec3d nv = len > 0.0 ? g / len : openvdb::Vec3d(0.0);
+                    cp->setValueOnly(it.pos(), openvdb::Vec3s(x - nv * (double(v0) / dx)));
+                    nrm->setValueOnly(it.pos(), openvdb::Vec3s(nv));
+                }
+            }
+        });
+    }
+    static const Coord kNeighbours[26] = {
+        {-1,-1,-1},{-1,-1,0},{-1,-1,1},{-1,0,-1},{-1,0,0},{-1,0,1},{-1,1,-1},{-1,1,0},{-1,1,1},
+        {0,-1,-1},{0,-1,0},{0,-1,1},{0,0,-1},{0,0,1},{0,1,-1},{0,1,0},{0,1,1},
+        {1,-1,-1},{1,-1,0},{1,-1,1},{1,0,-1},{1,0,0},{1,0,1},{1,1,-1},{1,1,0},{1,1,1}};
+    auto frontier = std::make_shared<MaskTree>(known);
+    for (int layer = 0; layer < dilation; ++layer) {
+        // The next layer: the last layer's neighbours within keep that are not known yet.
+        MaskTree next(*frontier);
+        openvdb::tools::dilateActiveValues(next, 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                           openvdb::tools::IGNORE_TILES);
+        next.topologyIntersection(keep);
+        next.topologyDifference(known);
+        std::vector<const MaskTree::LeafNodeType*> masks;
+        for (auto it = next.cbeginLeaf(); it; ++it) {
+            if (!it->isEmpty()) masks.push_back(it.getLeaf());
+        }
+        if (masks.empty()) break;
+        std::vector<LeafT*> out(masks.size());
+        std::vector<CpLeaf*> outCp(masks.size()), outN(masks.size());
+        openvdb::tree::ValueAccessor<const FloatTree> signAcc(grid.tree());
+        for (size_t k = 0; k < masks.size(); ++k) {
+            const Coord o = masks[k]->origin();
+            if (!ext->tree().probeLeaf(o)) {
+                // A new leaf takes the input's values beyond the band (+/- background) for signs.
+                const LeafT* src = signAcc.probeConstLeaf(o);
+                auto* leaf = src ? new LeafT(*src) : new LeafT(o, signAcc.getValue(o));
+                leaf->setValuesOff();
+                ext->tree().addLeaf(leaf);
+            }
+            out[k] = ext->tree().probeLeaf(o);
+            outCp[k] = cps.touchLeaf(o);
+            outN[k] = normals.touchLeaf(o);
+        }
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, masks.size()),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            openvdb::tree::ValueAccessor<const MaskTree> knownAcc(known);
+            openvdb::tree::ValueAccessor<const Vec3fTree> cpAcc(cps), nAcc(normals);
+            openvdb::tree::ValueAccessor<const FloatTree> in(grid.tree());
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                for (auto it = masks[k]->cbeginValueOn(); it; ++it) {
+                    const Coord ijk = it.getCoord();
+                    const openvdb::Vec3d y(ijk.x(), ijk.y(), ijk.z());
+                    double best = std::numeric_limits<double>::max();
+                    Coord from = ijk;
+                    for (const Coord& d : kNeighbours) {
+                        const Coord n = ijk + d;
+                        if (!knownAcc.isValueOn(n)) continue;
+                        const double dist = (y - openvdb::Vec3d(cpAcc.getValue(n))).lengthSqr();
+                        if (dist < best) best = dist, from = n;
+                    }
+                    const openvdb::Vec3d c(cpAcc.getValue(from)), nv(nAcc.getValue(from));
+                    double d = (y - c).dot(nv);
+                    if (nv.lengthSqr() == 0.0) d = std::sqrt(best); // no normal: the point
+                    const double sign = in.getValue(ijk) < 0.0f ? -1.0 : 1.0;
+                    out[k]->setValueOn(it.pos(), float(sign * std::abs(d) * dx));
+                    outCp[k]->setValueOnly(it.pos(), openvdb::Vec3s(c)); // a seed's point
+                    outN[k]->setValueOnly(it.pos(), openvdb::Vec3s(nv));
+                }
+            }
+        });
+        known.topologyUnion(next);
+        frontier = std::make_shared<MaskTree>(next);
+    }
+    return ext;
+}
+
+// extendLocally() for long extensions: by fast sweeping (openvdb::tools::dilateSdf), which
+// handles fronts that meet (past a medial axis). The leaves around are copied with their voxels
 // inactive, and leaf-sized tiles carry the inside sign, so the sweep sees on which side of the
 // surface each new voxel lies, as on the whole grid.
-openvdb::FloatGrid::Ptr extendLocally(const openvdb::FloatGrid& grid, const MaskTree& keep,
+openvdb::FloatGrid::Ptr extendBySweeping(const openvdb::FloatGrid& grid, const MaskTree& keep,
                                       int dilation)
 {
     auto clip = openvdb::FloatGrid::create(grid.background());
@@ -86,7 +225,8 @@ openvdb::FloatGrid::Ptr extendLocally(const openvdb::FloatGrid& grid, const Mask
     clip->setGridClass(openvdb::GRID_LEVEL_SET);
     openvdb::tree::ValueAccessor<const FloatTree> acc(grid.tree());
     openvdb::tree::ValueAccessor<const MaskTree> keepAcc(keep);
-    const MaskTree::Ptr around = dilatedCopy(*leafMask(keep), leavesFor(dilation) + 1);
+    // The leaves the grown band can reach (new voxels take their sign from there).
+    const MaskTree::Ptr around = leafMask(*dilatedCopy(keep, dilation + 1));
     for (const Coord& o : leafOrigins(*around)) {
         if (const LeafT* leaf = acc.probeConstLeaf(o)) {
             auto* copy = new LeafT(*leaf);
@@ -100,6 +240,19 @@ openvdb::FloatGrid::Ptr extendLocally(const openvdb::FloatGrid& grid, const Mask
     }
     if (dilation <= 0 || clip->tree().activeVoxelCount() == 0) return clip;
     return openvdb::tools::dilateSdf(*clip, dilation, openvdb::tools::NN_FACE_EDGE_VERTEX);
+}
+
+// Closest-point propagation loses accuracy where fronts from opposite sides meet (a medial
+// axis): inside a sphere of radius 15 voxels extended by 30, the blended surface was off by
+// 0.8 voxel. Up to this many layers it matches fast sweeping's accuracy or beats it (the
+// grid-blend tests, p = 10 and 50); beyond, fast sweeping takes over.
+constexpr int kMaxClosestPointLayers = 8;
+
+openvdb::FloatGrid::Ptr extendLocally(const openvdb::FloatGrid& grid, const MaskTree& keep,
+                                      int dilation)
+{
+    return dilation <= kMaxClosestPointLayers ? extendByClosestPoints(grid, keep, dilation)
+                                              : extendBySweeping(grid, keep, dilation);
 }
 
 implicit::Csg::Op implicitOp(CsgOp op)
@@ -236,7 +389,9 @@ openvdb::FloatGrid::Ptr blendOnTarget(CsgOp op, const std::vector<openvdb::Float
         double estimate = 0.0;
         std::vector<MaskTree::Ptr> keep(n);
         for (size_t i = 0; i < n; ++i) {
-            keep[i] = dilatedCopy(crease, dilation[i] + 1);
+            // The grown band where the crease reads it, and the band itself over the whole
+            // region (whose re-distancing reads the surface there).
+            keep[i] = dilatedCopy(crease, std::max(dilation[i] + 1, int(std::ceil(halfWidth)) + 2));
             estimate += grownBytes(*leafMask(*keep[i]), dilation[i]);
         }
         if (estimate > limit) refuse(estimate, limit);
@@ -346,7 +501,18 @@ openvdb::FloatGrid::Ptr blendOnTarget(CsgOp op, const std::vector<openvdb::Float
             }
         });
         checkInterrupt(settings.interrupter);
+        // Re-distance only what the blended voxels read: the surface within a band width of them
+        // (the other voxels keep their values, inactive, for their signs).
         auto samples = combined->deepCopy();
+        {
+            const MaskTree::Ptr around = dilatedCopy(blended, int(std::ceil(halfWidth)) + 2);
+            openvdb::tree::LeafManager<FloatTree> sampleLeaves(samples->tree());
+            sampleLeaves.foreach([&](LeafT& leaf, size_t) {
+                const MaskTree::LeafNodeType* m = around->probeConstLeaf(leaf.origin());
+                leaf.setValueMask(m ? leaf.getValueMask() & m->getValueMask()
+                                    : LeafT::NodeMaskType());
+            });
+        }
         redistanced = levelset::redistance(*samples, halfWidth, settings.interrupter);
     }
 

@@ -25,6 +25,22 @@ namespace ivdb::raster {
 
 namespace {
 
+/// A CSG tree whose leaves are exact distances: its value is min / max of distances.
+bool isCsgOfDistances(const implicit::Implicit& f)
+{
+    if (f.isExactSdf()) return true;
+    const auto* c = dynamic_cast<const implicit::Csg*>(&f);
+    if (!c) return false;
+    for (const auto& child : c->children()) {
+        if (!isCsgOfDistances(*child)) return false;
+    }
+    return true;
+}
+
+} // namespace
+
+namespace {
+
 using implicit::BBoxd;
 using implicit::Implicit;
 using implicit::Interval;
@@ -473,6 +489,16 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
     ctx.halfWidthVox = s.halfWidth;
     ctx.band = s.halfWidth * s.voxelSize;
     ctx.exact = ctx.shape->isExactSdf();
+    if (s.distance == Distance::Bound && !ctx.exact) {
+        if (!isCsgOfDistances(*ctx.shape)) {
+            OPENVDB_THROW(openvdb::ValueError,
+                "\"distance\": \"bound\" needs a union, intersection or difference of exact "
+                "distances (spheres, boxes, tori and their rigid or uniformly scaled transforms); "
+                "this shape has a quadric, a blend or a non-uniform scale: remove \"distance\" "
+                "to re-distance it");
+        }
+        ctx.exact = true; // the stored value is f itself
+    }
     ctx.interrupter = s.interrupter;
     if (ctx.exact) {
         ctx.reach = ctx.band;

@@ -351,7 +351,7 @@ Scene parseScene(const std::string& text, const std::string& origin)
                          "scene format)");
     }
     ObjectReader r(j, "", origin);
-    r.allowOnly({"voxel_size", "half_width", "bounds", "shape"});
+    r.allowOnly({"voxel_size", "half_width", "bounds", "distance", "shape"});
     Scene scene;
     if (r.has("voxel_size")) scene.voxelSize = r.positive("voxel_size");
     scene.halfWidth = r.positive("half_width", 3.0);
@@ -359,6 +359,8 @@ Scene parseScene(const std::string& text, const std::string& origin)
         r.fail("half_width", "must be in [1, " + util::formatNumber(raster::kMaxHalfWidth) +
                                  "] voxels, got " + util::formatNumber(scene.halfWidth));
     }
+    scene.distanceBound =
+        r.string("distance", {"exact", "bound"}, std::string("exact")) == "bound";
     if (r.has("bounds")) {
         ObjectReader b(r.raw("bounds"), "bounds", origin);
         b.allowOnly({"min", "max"});

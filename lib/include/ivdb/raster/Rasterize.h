@@ -21,6 +21,18 @@ enum class Sampling {
 /// @brief The widest narrow band accepted, in voxels.
 inline constexpr double kMaxHalfWidth = 1000.0;
 
+/// What a CSG of exact distances stores in the band.
+enum class Distance
+{
+    /// True signed distances: shapes that are not exact distances are re-distanced.
+    Exact,
+    /// CSG (union, intersection, difference) of exact distances stored as it is, min / max,
+    /// as OpenVDB's csg tools give it: exact outside a union, at most the distance inside near
+    /// a crease (and the mirror for intersections). Much faster: no re-distancing. Shapes that
+    /// are not such a CSG are refused.
+    Bound
+};
+
 struct RasterSettings
 {
     /// World units per voxel; must be > 0.
@@ -35,6 +47,8 @@ struct RasterSettings
     bool threaded = true;
     /// Progress and cancellation (may be null). Cancellation throws openvdb::RuntimeError.
     openvdb::util::NullInterrupter* interrupter = nullptr;
+    /// Exact distances everywhere, or CSG of distances as it is (see Distance).
+    Distance distance = Distance::Exact;
     /// Memory the dense path may use, in bytes; 0 means the machine's available memory.
     std::uint64_t denseMemoryLimit = 0;
 };
