@@ -185,7 +185,11 @@ struct Level1Result
     bool inside = false;    // the whole level-1 box is an inside tile
 };
 
-/// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels).
+/// Blocks between OpenVDB's 128^3 internal nodes and its 8^3 leaves in the descent.
+constexpr int kBlock = 32;
+
+/// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels), with 32^3
+/// blocks between the last two.
 openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
 {
     const float bg = static_cast<float>(ctx.band);
@@ -246,25 +250,50 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
             CoordBBox sub = box1;
             sub.intersect(ctx.region);
             const int d0 = LeafT::DIM;
-            for (int a = alignDown(sub.min().x(), d0); a <= sub.max().x(); a += d0) {
-                for (int b = alignDown(sub.min().y(), d0); b <= sub.max().y(); b += d0) {
-                    for (int c = alignDown(sub.min().z(), d0); c <= sub.max().z(); c += d0) {
-                        const Coord o(a, b, c);
-                        const CoordBBox box0 = CoordBBox::createCube(o, d0);
-                        const Verdict v0 = ctx.classify(*node1, box0);
-                        bool inside = v0 == Verdict::Inside;
-                        if (v0 == Verdict::Straddle) {
-                            const Implicit::Ptr node0 = node1->prune(ctx.dilatedWorldBox(box0));
-                            if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside)) {
-                                int1->addLeaf(leaf);
+            // The leaves of one block (a straddling one, or one inside: tiles only).
+            auto leavesOf = [&](const CoordBBox& block, const Implicit* node, bool blockInside) {
+                CoordBBox part = block;
+                part.intersect(sub);
+                for (int a = alignDown(part.min().x(), d0); a <= part.max().x(); a += d0) {
+                    for (int b = alignDown(part.min().y(), d0); b <= part.max().y(); b += d0) {
+                        for (int c = alignDown(part.min().z(), d0); c <= part.max().z(); c += d0) {
+                            const Coord o(a, b, c);
+                            bool inside = blockInside;
+                            if (!blockInside) {
+                                const CoordBBox box0 = CoordBBox::createCube(o, d0);
+                                const Verdict v0 = ctx.classify(*node, box0);
+                                inside = v0 == Verdict::Inside;
+                                if (v0 == Verdict::Straddle) {
+                                    const Implicit::Ptr node0 = node->prune(ctx.dilatedWorldBox(box0));
+                                    if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside)) {
+                                        int1->addLeaf(leaf);
+                                        any = true;
+                                        continue;
+                                    }
+                                }
+                            }
+                            if (inside) {
+                                int1->addTile(int1->coordToOffset(o), -bg, false);
                                 any = true;
-                                continue;
                             }
                         }
-                        if (inside) {
-                            int1->addTile(int1->coordToOffset(o), -bg, false);
-                            any = true;
+                    }
+                }
+            };
+            // Blocks of 4^3 leaves in between: a leaf then tests the few primitives near its
+            // block instead of the hundreds near its 128^3 node (1000 spheres: ~3x faster).
+            for (int a = alignDown(sub.min().x(), kBlock); a <= sub.max().x(); a += kBlock) {
+                for (int b = alignDown(sub.min().y(), kBlock); b <= sub.max().y(); b += kBlock) {
+                    for (int c = alignDown(sub.min().z(), kBlock); c <= sub.max().z(); c += kBlock) {
+                        const CoordBBox block = CoordBBox::createCube(Coord(a, b, c), kBlock);
+                        const Verdict vb = ctx.classify(*node1, block);
+                        if (vb == Verdict::Outside) continue;
+                        if (vb == Verdict::Inside) {
+                            leavesOf(block, nullptr, true);
+                            continue;
                         }
+                        const Implicit::Ptr nodeB = node1->prune(ctx.dilatedWorldBox(block));
+                        leavesOf(block, nodeB.get(), false);
                     }
                 }
             }
