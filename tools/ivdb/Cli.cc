@@ -1,5 +1,7 @@
 #include "Cli.h"
 
+#include <ivdb/levelset/Fog.h>
+
 #include <ivdb/Version.h>
 #include <ivdb/diff/Differential.h>
 #include <ivdb/io/VdbFile.h>
@@ -122,6 +124,26 @@ void writeOutput(const std::string& path, const openvdb::GridCPtrVec& grids)
     io::writeVdb(path, grids, fileMeta);
 }
 
+openvdb::GridCPtrVec withFog(const openvdb::FloatGrid::Ptr& surface, bool fog)
+{
+    openvdb::GridCPtrVec grids{surface};
+    if (fog) {
+        openvdb::FloatGrid::Ptr density = levelset::fogFromLevelSet(*surface);
+        for (const char* key : {"ivdb_version", "ivdb_source"}) {
+            if (auto meta = (*surface)[key]) density->insertMeta(key, *meta);
+        }
+        grids.push_back(density);
+    }
+    return grids;
+}
+
+void addFogFlag(CLI::App& cmd, bool& fog)
+{
+    cmd.add_flag("--fog", fog,
+                 "Also write a 'density' fog volume (0 outside, a ramp across the inside of the "
+                 "band, 1 deeper inside) so Blender renders the file as a volume");
+}
+
 ops::CsgOp csgOp(const std::string& word)
 {
     return word == "union" ? ops::CsgOp::Union
@@ -152,6 +174,7 @@ int run(int argc, char** argv)
         addCompareGradient(app, action);
         addCsg(app, action);
         addBlend(app, action);
+        addMesh(app, action);
         addBench(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {
@@ -161,7 +184,7 @@ int run(int argc, char** argv)
             const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
             if (subs.empty()) {
                 std::cerr << "ivdb: error: unknown command '" << a
-                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, bench (run 'ivdb --help')" << std::endl;
+                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, mesh, bench (run 'ivdb --help')" << std::endl;
                 return 2;
             }
             break;

@@ -35,6 +35,7 @@ void addCompareGradient(CLI::App& app, Action& action);
 void addCsg(CLI::App& app, Action& action);
 void addBlend(CLI::App& app, Action& action);
 void addBench(CLI::App& app, Action& action);
+void addMesh(CLI::App& app, Action& action);
 /// @}
 
 /// @brief Rasterizer settings from a scene and the command line's --voxel-size and --half-width.
@@ -69,6 +70,13 @@ openvdb::FloatGrid::Ptr readLevelSet(const std::string& path, const std::string&
 
 /// @brief Stamp @a grid with `ivdb_version` and `ivdb_source` (what made it).
 void stampGrid(openvdb::GridBase& grid, const std::string& source);
+
+/// @brief {@a surface}, plus a `density` fog volume made from it when @a fog (--fog), stamped
+/// like @a surface.
+openvdb::GridCPtrVec withFog(const openvdb::FloatGrid::Ptr& surface, bool fog);
+
+/// @brief The --fog flag of the commands that write a level set.
+void addFogFlag(CLI::App& cmd, bool& fog);
 
 /// @brief Write @a grids atomically to @a path with the file's `creator` metadata.
 void writeOutput(const std::string& path, const openvdb::GridCPtrVec& grids);

@@ -21,6 +21,7 @@ struct BlendOptions
     std::vector<std::string> inputs;
     double p = 0.0, tolerance = 0.05;
     bool quiet = false;
+    bool fog = false;
 };
 
 int runBlend(const BlendOptions& opt)
@@ -59,7 +60,7 @@ int runBlend(const BlendOptions& opt)
     std::string sources;
     for (const auto& p : opt.inputs) sources += (sources.empty() ? "" : " ") + p;
     stampGrid(*result, "blend " + opt.op + " p=" + util::formatNumber(opt.p) + " " + sources);
-    writeOutput(opt.output, {result});
+    writeOutput(opt.output, withFog(result, opt.fog));
     const auto t3 = std::chrono::steady_clock::now();
     if (!opt.quiet) {
         std::printf("blend %s p=%s of %zu level sets: %llu active voxels, read %.3f s, blend "
@@ -96,6 +97,7 @@ void addBlend(CLI::App& app, Action& action)
         ->capture_default_str();
     cmd->add_option("--grid", opt->grid, "Grid name in every input (default: each file's first "
                                          "level set)");
+    addFogFlag(*cmd, opt->fog);
     cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
     cmd->callback([&action, opt]() { action = [opt]() { return runBlend(*opt); }; });
 }

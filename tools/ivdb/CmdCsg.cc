@@ -18,6 +18,7 @@ struct CsgOptions
     std::string op, output, grid;
     std::vector<std::string> inputs;
     bool quiet = false;
+    bool fog = false;
 };
 
 int runCsg(const CsgOptions& opt)
@@ -43,7 +44,7 @@ int runCsg(const CsgOptions& opt)
     std::string sources;
     for (const auto& p : opt.inputs) sources += (sources.empty() ? "" : " ") + p;
     stampGrid(*result, "csg " + opt.op + " " + sources);
-    writeOutput(opt.output, {result});
+    writeOutput(opt.output, withFog(result, opt.fog));
     const auto t3 = std::chrono::steady_clock::now();
     if (!opt.quiet) {
         std::printf("csg %s of %zu level sets: %llu active voxels, read %.3f s, combine %.3f s, "
@@ -72,6 +73,7 @@ void addCsg(CLI::App& app, Action& action)
     cmd->add_option("-o,--output", opt->output, "Output .vdb file (written atomically)")->required();
     cmd->add_option("--grid", opt->grid, "Grid name in every input (default: each file's first "
                                          "level set)");
+    addFogFlag(*cmd, opt->fog);
     cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
     cmd->callback([&action, opt]() { action = [opt]() { return runCsg(*opt); }; });
 }

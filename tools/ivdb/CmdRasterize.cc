@@ -27,6 +27,7 @@ struct RasterizeOptions
     std::string sampling = "sparse";
     std::string distance; // empty: the scene's
     bool quiet = false;
+    bool fog = false;
 };
 
 int runRasterize(const RasterizeOptions& opt)
@@ -60,7 +61,7 @@ int runRasterize(const RasterizeOptions& opt)
     stampGrid(*grid, opt.scene);
     grid->insertMeta("ivdb_scene", openvdb::StringMetadata(sc.json));
     grid->insertMeta("ivdb_sampling", openvdb::StringMetadata(opt.sampling));
-    writeOutput(opt.output, {grid});
+    writeOutput(opt.output, withFog(grid, opt.fog));
     const auto t2 = std::chrono::steady_clock::now();
 
     if (!opt.quiet) {
@@ -106,6 +107,7 @@ void addRasterize(CLI::App& app, Action& action)
                     "OpenVDB's csg tools give it, without re-distancing (overrides the scene's "
                     "\"distance\", default exact)")
         ->check(CLI::IsMember({"exact", "bound"}));
+    addFogFlag(*cmd, opt->fog);
     cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
     cmd->callback([&action, opt]() { action = [opt]() { return runRasterize(*opt); }; });
 }

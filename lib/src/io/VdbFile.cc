@@ -201,8 +201,8 @@ void checkOutputPath(const std::string& path)
     }
 }
 
-void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
-              const openvdb::MetaMap& fileMetadata)
+void writeFileAtomically(const std::string& path,
+                         const std::function<void(std::ostream&)>& write)
 {
     checkOutputPath(path);
     static std::atomic<unsigned> counter{0};
@@ -215,7 +215,7 @@ void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
             std::ofstream os;
             os.exceptions(std::ios::badbit | std::ios::failbit);
             os.open(tmp, std::ios::out | std::ios::binary | std::ios::trunc);
-            CheckedArchive().writeTo(os, grids, fileMetadata);
+            write(os);
             os.flush();
             os.close();
         }
@@ -242,6 +242,14 @@ void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
         std::remove(tmp.c_str());
         ioError(path, std::string("cannot write: ") + e.what());
     }
+}
+
+void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
+              const openvdb::MetaMap& fileMetadata)
+{
+    writeFileAtomically(path, [&](std::ostream& os) {
+        CheckedArchive().writeTo(os, grids, fileMetadata);
+    });
 }
 
 openvdb::GridPtrVec readVdb(const std::string& path)

@@ -3,6 +3,8 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <functional>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -13,7 +15,16 @@ namespace ivdb::io {
 /// @throw openvdb::IoError naming the path and the reason
 void checkOutputPath(const std::string& path);
 
-/// @brief Write @a grids to @a path with OpenVDB's default compression, atomically.
+/// @brief Write a file atomically: @a write fills a stream on a temporary file in @a path's
+/// folder (`.NAME.tmp-PID-N`), which is then flushed, synced and renamed over @a path. A failure
+/// (a full disk, an exception from @a write) removes the temporary file and leaves @a path as it
+/// was. Stream errors throw inside @a write (the stream has exceptions enabled).
+/// @throw openvdb::IoError naming the path and the reason
+void writeFileAtomically(const std::string& path,
+                         const std::function<void(std::ostream&)>& write);
+
+/// @brief Write @a grids to @a path with OpenVDB's default compression, atomically
+/// (writeFileAtomically).
 /// @details The grids go to a temporary file in the same folder (`.NAME.tmp-PID-N`), which is
 /// flushed, synced and renamed over @a path: a failure (a full disk, say) or a kill leaves
 /// either the old file or the complete new one, never a partial or clobbered @a path. After an

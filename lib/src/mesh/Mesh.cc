@@ -1,0 +1,142 @@
+#include <ivdb/mesh/Mesh.h>
+
+#include <ivdb/io/VdbFile.h>
+#include <ivdb/util/System.h>
+
+#include <openvdb/tools/VolumeToMesh.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <ostream>
+
+namespace ivdb::mesh {
+
+namespace {
+
+// Twice the signed volume of the tetrahedron (origin, a, b, c), times 3: a . (b x c).
+double tripleProduct(const openvdb::Vec3s& a, const openvdb::Vec3s& b, const openvdb::Vec3s& c)
+{
+    return openvdb::Vec3d(a).dot(openvdb::Vec3d(b).cross(openvdb::Vec3d(c)));
+}
+
+void checkData(const Mesh& mesh, const VertexData* data, const std::string& path)
+{
+    if (!data) return;
+    if ((!data->colors.empty() && data->colors.size() != mesh.points.size()) ||
+        (!data->scalars.empty() && data->scalars.size() != mesh.points.size())) {
+        OPENVDB_THROW(openvdb::IoError, path + ": per-vertex data does not match the vertices");
+    }
+}
+
+std::uint8_t toByte(float c)
+{
+    return std::uint8_t(std::lround(std::clamp(c, 0.0f, 1.0f) * 255.0f));
+}
+
+} // namespace
+
+Mesh meshLevelSet(const openvdb::FloatGrid& grid, double adaptivity)
+{
+    if (!(adaptivity >= 0.0 && adaptivity <= 1.0)) {
+        OPENVDB_THROW(openvdb::ValueError,
+                      "adaptivity must be in [0, 1], got " + util::formatNumber(adaptivity));
+    }
+    Mesh m;
+    openvdb::tools::volumeToMesh(grid, m.points, m.triangles, m.quads, 0.0, adaptivity, true);
+    // volumeToMesh's winding depends on the sign convention; make the normals point outwards.
+    if (enclosedVolume(m) < 0.0) {
+        for (auto& t : m.triangles) std::swap(t[1], t[2]);
+        for (auto& q : m.quads) std::swap(q[1], q[3]);
+    }
+    return m;
+}
+
+double enclosedVolume(const Mesh& mesh)
+{
+    const auto& p = mesh.points;
+    double v = 0.0;
+    for (const auto& t : mesh.triangles) v += tripleProduct(p[t[0]], p[t[1]], p[t[2]]);
+    for (const auto& q : mesh.quads) {
+        v += tripleProduct(p[q[0]], p[q[1]], p[q[2]]);
+        v += tripleProduct(p[q[0]], p[q[2]], p[q[3]]);
+    }
+    return v / 6.0;
+}
+
+void writeObj(const std::string& path, const Mesh& mesh, const VertexData* data)
+{
+    checkData(mesh, data, path);
+    const bool colors = data && !data->colors.empty();
+    io::writeFileAtomically(path, [&](std::ostream& os) {
+        os << "# ivdb mesh: " << mesh.points.size() << " vertices, " << mesh.faceCount()
+           << " faces\n";
+        char line[160];
+        for (size_t i = 0; i < mesh.points.size(); ++i) {
+            const auto& v = mesh.points[i];
+            int n = std::snprintf(line, sizeof(line), "v %.7g %.7g %.7g", v[0], v[1], v[2]);
+            if (colors) {
+                const auto& c = data->colors[i];
+                n += std::snprintf(line + n, sizeof(line) - size_t(n), " %.4f %.4f %.4f", c[0],
+                                   c[1], c[2]);
+            }
+            os << line << '\n';
+        }
+        for (const auto& t : mesh.triangles) {
+            os << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
+        }
+        for (const auto& q : mesh.quads) {
+            os << "f " << q[0] + 1 << ' ' << q[1] + 1 << ' ' << q[2] + 1 << ' ' << q[3] + 1 << '\n';
+        }
+    });
+}
+
+void writePly(const std::string& path, const Mesh& mesh, const VertexData* data)
+{
+    checkData(mesh, data, path);
+    const bool colors = data && !data->colors.empty();
+    const bool scalars = data && !data->scalars.empty();
+    io::writeFileAtomically(path, [&](std::ostream& os) {
+        os << "ply\nformat binary_little_endian 1.0\ncomment written by ivdb\n"
+           << "element vertex " << mesh.points.size() << "\n"
+           << "property float x\nproperty float y\nproperty float z\n";
+        if (colors) os << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+        if (scalars) os << "property float " << data->scalarName << "\n";
+        os << "element face " << mesh.faceCount() << "\n"
+           << "property list uchar int vertex_indices\nend_header\n";
+        std::vector<char> buf;
+        auto put = [&buf](const void* p, size_t n) {
+            const char* c = static_cast<const char*>(p);
+            buf.insert(buf.end(), c, c + n);
+        };
+        for (size_t i = 0; i < mesh.points.size(); ++i) {
+            const float xyz[3] = {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2]};
+            put(xyz, sizeof(xyz)); // x86: already little endian
+            if (colors) {
+                const std::uint8_t rgb[3] = {toByte(data->colors[i][0]), toByte(data->colors[i][1]),
+                                             toByte(data->colors[i][2])};
+                put(rgb, 3);
+            }
+            if (scalars) put(&data->scalars[i], sizeof(float));
+            if (buf.size() > (1u << 20)) os.write(buf.data(), std::streamsize(buf.size())), buf.clear();
+        }
+        for (const auto& t : mesh.triangles) {
+            const std::uint8_t n = 3;
+            const std::int32_t idx[3] = {std::int32_t(t[0]), std::int32_t(t[1]), std::int32_t(t[2])};
+            put(&n, 1);
+            put(idx, sizeof(idx));
+        }
+        for (const auto& q : mesh.quads) {
+            const std::uint8_t n = 4;
+            const std::int32_t idx[4] = {std::int32_t(q[0]), std::int32_t(q[1]), std::int32_t(q[2]),
+                                         std::int32_t(q[3])};
+            put(&n, 1);
+            put(idx, sizeof(idx));
+            if (buf.size() > (1u << 20)) os.write(buf.data(), std::streamsize(buf.size())), buf.clear();
+        }
+        os.write(buf.data(), std::streamsize(buf.size()));
+    });
+}
+
+} // namespace ivdb::mesh

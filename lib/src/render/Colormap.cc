@@ -1,0 +1,39 @@
+#include <ivdb/render/Colormap.h>
+
+#include "ColormapTables.h"
+
+#include <openvdb/Exceptions.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace ivdb::render {
+
+const std::vector<std::string>& Colormap::names()
+{
+    static const std::vector<std::string> kNames{"hsv", "viridis", "coolwarm", "gray"};
+    return kNames;
+}
+
+Colormap::Colormap(const std::string& name): mName(name)
+{
+    if (name == "hsv") mTable = detail::kHsv;
+    else if (name == "viridis") mTable = detail::kViridis;
+    else if (name == "coolwarm") mTable = detail::kCoolwarm;
+    else if (name != "gray") {
+        OPENVDB_THROW(openvdb::ValueError,
+                      "unknown colormap '" + name + "': use hsv, viridis, coolwarm or gray");
+    }
+}
+
+openvdb::Vec3f Colormap::at(double t) const
+{
+    if (!(t > 0.0)) t = 0.0; // also NaN
+    t = std::min(t, 1.0);
+    // matplotlib's lookup: 256 entries, the last for t = 1 too.
+    const int i = std::min(int(t * detail::kEntries), detail::kEntries - 1);
+    if (!mTable) return openvdb::Vec3f(float(i) / float(detail::kEntries - 1));
+    return openvdb::Vec3f(mTable[i][0], mTable[i][1], mTable[i][2]);
+}
+
+} // namespace ivdb::render

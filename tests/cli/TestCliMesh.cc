@@ -1,0 +1,117 @@
+// ivdb mesh and --fog end to end: the files written (read back with OpenVDB), and bad arguments
+// (non-zero exit, `ivdb: error: `, no output).
+#include "CliRun.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+using ivdb::test::runIvdb;
+using ivdb::test::slurpFile;
+
+class TestCliMesh: public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        mDir = fs::temp_directory_path() /
+               ("ivdb-test-cli-mesh-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        fs::remove_all(mDir);
+        fs::create_directories(mDir);
+        std::ofstream(mDir / "s.json") << R"({"voxel_size": 0.05, "shape": {"type": "sphere", "radius": 1}})";
+    }
+    void TearDown() override
+    {
+        std::error_code ec;
+        fs::remove_all(mDir, ec);
+    }
+    fs::path mDir;
+};
+
+TEST_F(TestCliMesh, FogGridBesideTheSurface)
+{
+    for (const auto& args : std::vector<std::vector<std::string>>{
+             {"rasterize", "s.json", "-o", "a.vdb", "--fog", "-q"},
+             {"rasterize", "s.json", "-o", "b.vdb", "-q"},
+             {"csg", "union", "a.vdb", "b.vdb", "-o", "u.vdb", "--fog", "-q"},
+             {"blend", "union", "a.vdb", "b.vdb", "-p", "50", "-o", "bl.vdb", "--fog", "-q"}}) {
+        const auto r = runIvdb(mDir, args);
+        ASSERT_EQ(r.exitCode, 0) << args[0] << ": " << r.err;
+    }
+    for (const char* name : {"a.vdb", "u.vdb", "bl.vdb"}) {
+        openvdb::io::File f((mDir / name).string());
+        f.open();
+        auto grids = f.getGrids();
+        f.close();
+        ASSERT_EQ(grids->size(), 2u) << name;
+        openvdb::GridBase::Ptr surface, density;
+        for (const auto& g : *grids) (g->getName() == "surface" ? surface : density) = g;
+        ASSERT_TRUE(surface && density) << name;
+        EXPECT_EQ(density->getName(), "density");
+        EXPECT_EQ(surface->getGridClass(), openvdb::GRID_LEVEL_SET);
+        EXPECT_EQ(density->getGridClass(), openvdb::GRID_FOG_VOLUME);
+        auto fog = openvdb::gridPtrCast<openvdb::FloatGrid>(density);
+        EXPECT_EQ(fog->tree().getValue(openvdb::Coord(0, 0, 0)), 1.0f) << name;  // deep inside
+        EXPECT_EQ(fog->tree().getValue(openvdb::Coord(40, 0, 0)), 0.0f) << name; // outside
+    }
+    openvdb::io::File f((mDir / "b.vdb").string());
+    f.open();
+    EXPECT_EQ(f.getGrids()->size(), 1u); // no --fog: the surface only
+}
+
+TEST_F(TestCliMesh, ObjAndColouredPly)
+{
+    ASSERT_EQ(runIvdb(mDir, {"rasterize", "s.json", "-o", "s.vdb", "-q"}).exitCode, 0);
+    auto r = runIvdb(mDir, {"mesh", "s.vdb", "-o", "s.obj"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("enclosed volume"), std::string::npos) << r.out;
+    const std::string obj = slurpFile(mDir / "s.obj");
+    EXPECT_NE(obj.find("\nv "), std::string::npos);
+    EXPECT_NE(obj.find("\nf "), std::string::npos);
+    r = runIvdb(mDir, {"mesh", "s.vdb", "-o", "s.ply", "--color-by", "s.vdb:surface", "--colormap",
+                       "hsv", "--range", "-0.1,0.1", "-q"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const std::string ply = slurpFile(mDir / "s.ply");
+    EXPECT_EQ(ply.rfind("ply\nformat binary_little_endian 1.0\n", 0), 0u);
+    EXPECT_NE(ply.find("property uchar red"), std::string::npos);
+    EXPECT_NE(ply.find("property float surface"), std::string::npos);
+}
+
+TEST_F(TestCliMesh, BadArguments)
+{
+    ASSERT_EQ(runIvdb(mDir, {"rasterize", "s.json", "-o", "s.vdb", "--fog", "-q"}).exitCode, 0);
+    const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
+        {{"mesh", "s.vdb", "-o", "x.obj", "--colormap", "jet", "--color-by", "s.vdb"}, "colormap 'jet'"},
+        {{"mesh", "s.vdb", "-o", "x.obj", "--range", "1,1", "--color-by", "s.vdb"}, "LO < HI"},
+        {{"mesh", "s.vdb", "-o", "x.obj", "--range", "a,b", "--color-by", "s.vdb"}, "--range"},
+        {{"mesh", "s.vdb", "-o", "x.stl"}, ".obj or .ply"},
+        {{"mesh", "s.vdb", "-o", "x.obj", "--adaptivity", "2"}, "--adaptivity"},
+        {{"mesh", "s.vdb", "-o", "x.obj", "--grid", "density"}, "density"},
+        {{"mesh", "missing.vdb", "-o", "x.obj"}, "missing.vdb"},
+        {{"mesh", "s.vdb", "-o", "x.obj", "--color-by", "s.vdb:nothing"}, "nothing"},
+        {{"mesh", "s.vdb", "-o", "no/such/folder/x.obj"}, "no/such/folder"},
+    };
+    for (const auto& [args, mention] : cases) {
+        const auto r = runIvdb(mDir, args);
+        EXPECT_NE(r.exitCode, 0) << mention;
+        EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << r.err;
+        EXPECT_NE(r.err.find(mention), std::string::npos) << "expected '" << mention << "' in " << r.err;
+        EXPECT_FALSE(fs::exists(mDir / "x.obj")) << mention;
+        EXPECT_FALSE(fs::exists(mDir / "x.stl")) << mention;
+    }
+}
+
+} // namespace
