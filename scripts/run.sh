@@ -2,7 +2,9 @@
 # README command 1: install what is missing, build in Release, and run the main job:
 # rasterize every scene in data/ into out/NAME.vdb (one summary line per scene), then the grid
 # pipelines: the seed's figure 1 trio as grid CSG of two rasterized spheres, a grid blend, and
-# the gradient and mean curvature of figure 4's difference of two spheres.
+# the gradient and mean curvature of figure 4's difference of two spheres; meshes of the figure 4
+# difference coloured by its mean curvature (HSV over [-50, 50]) and of the figure 5 blend,
+# gradient arrows on a sphere (figure 3), and a Blender-ready --fog copy of the figure 5 blend.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -20,3 +22,9 @@ done
 "$ivdb" blend union out/sphere_left.vdb out/sphere_right.vdb -p 50 -o out/grid_blend_union_p50.vdb
 "$ivdb" gradient out/fig1_difference.vdb -o out/fig1_difference_gradient.vdb --magnitude --with-input
 "$ivdb" curvature out/fig1_difference.vdb -o out/fig1_difference_curvature.vdb --with-input
+"$ivdb" mesh out/fig1_difference.vdb -o out/fig1_difference_curvature.ply \
+  --color-by out/fig1_difference_curvature.vdb:curvature --colormap hsv --range=-50,50
+"$ivdb" mesh out/fig5_blend_union.vdb -o out/fig5_blend_union.obj
+"$ivdb" rasterize data/fig5_blend_union.json -o out/fig5_blend_union_fog.vdb --fog -q
+"$ivdb" gradient out/sphere.vdb -o out/sphere_gradient.vdb --with-input -q
+"$ivdb" glyphs out/sphere_gradient.vdb -o out/fig3_sphere_arrows.ply --stride 8

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -111,6 +112,47 @@ TEST_F(TestCliMesh, BadArguments)
         EXPECT_NE(r.err.find(mention), std::string::npos) << "expected '" << mention << "' in " << r.err;
         EXPECT_FALSE(fs::exists(mDir / "x.obj")) << mention;
         EXPECT_FALSE(fs::exists(mDir / "x.stl")) << mention;
+    }
+}
+
+} // namespace
+
+namespace {
+
+TEST_F(TestCliMesh, GlyphsPointAlongTheGradient)
+{
+    ASSERT_EQ(runIvdb(mDir, {"rasterize", "s.json", "-o", "s.vdb", "--fog", "-q"}).exitCode, 0);
+    ASSERT_EQ(runIvdb(mDir, {"gradient", "s.vdb", "-o", "g.vdb", "--with-input", "-q"}).exitCode, 0);
+    auto r = runIvdb(mDir, {"glyphs", "g.vdb", "-o", "a.obj", "--stride", "2"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("arrows"), std::string::npos) << r.out;
+    // Every arrow (20 vertices: 18 ring vertices, the tip, the base) points away from the centre.
+    std::istringstream in(slurpFile(mDir / "a.obj"));
+    std::string line;
+    std::vector<openvdb::Vec3d> v;
+    while (std::getline(in, line)) {
+        double x, y, z;
+        if (std::sscanf(line.c_str(), "v %lf %lf %lf", &x, &y, &z) == 3) v.emplace_back(x, y, z);
+    }
+    ASSERT_GT(v.size(), 20u * 50u);
+    ASSERT_EQ(v.size() % 20, 0u);
+    for (size_t a = 0; a < v.size(); a += 20) {
+        const openvdb::Vec3d tip = v[a + 18], base = v[a + 19];
+        // Near the surface of the unit sphere, along the outward normal.
+        EXPECT_NEAR(base.length(), 1.0, 0.05);
+        EXPECT_GT((tip - base).unitSafe().dot(base.unitSafe()), 0.99);
+    }
+    const std::vector<std::pair<std::vector<std::string>, std::string>> bad = {
+        {{"glyphs", "g.vdb", "-o", "x.obj", "--stride", "0"}, "--stride"},
+        {{"glyphs", "s.vdb", "-o", "x.obj"}, "no vec3s"},
+        {{"glyphs", "g.vdb", "-o", "x.stl"}, ".obj or .ply"},
+        {{"glyphs", "g.vdb", "-o", "x.obj", "--grid", "surface"}, "vec3s"},
+    };
+    for (const auto& [args, mention] : bad) {
+        r = runIvdb(mDir, args);
+        EXPECT_NE(r.exitCode, 0) << mention;
+        EXPECT_NE(r.err.find(mention), std::string::npos) << r.err;
+        EXPECT_FALSE(fs::exists(mDir / "x.obj"));
     }
 }
 

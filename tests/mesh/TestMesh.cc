@@ -213,3 +213,31 @@ TEST_F(TestMesh, FogIsZeroOutsideOneInsideAndMonotonic)
         previous = d;
     }
 }
+
+TEST_F(TestMesh, ArrowsAreClosedSolidsFromBaseToTip)
+{
+    const std::vector<openvdb::Vec3d> bases{{0, 0, 0}, {1, 2, 3}, {-1, 0.5, 0}};
+    const std::vector<openvdb::Vec3d> vectors{{1, 0, 0}, {0, 0.5, 0.5}, {0, 0, 0}};
+    std::vector<openvdb::Vec3f> colors;
+    const mesh::Mesh m = mesh::arrows(bases, vectors, 2.0, &colors);
+    // Two arrows (the zero vector is skipped), 20 vertices and 36 triangles each.
+    ASSERT_EQ(m.points.size(), 40u);
+    ASSERT_EQ(m.triangles.size(), 72u);
+    ASSERT_EQ(colors.size(), 40u);
+    for (int a = 0; a < 2; ++a) {
+        mesh::Mesh one;
+        one.points.assign(m.points.begin() + 20 * a, m.points.begin() + 20 * (a + 1));
+        for (size_t t = 36 * a; t < 36 * size_t(a + 1); ++t) {
+            one.triangles.push_back(m.triangles[t] - openvdb::Vec3I(20 * a));
+        }
+        // A closed, outward solid: positive volume, close to a cylinder plus a cone.
+        const double len = (vectors[a] * 2.0).length();
+        const double expected = M_PI * std::pow(0.04 * len, 2) * 0.75 * len +
+                                M_PI * std::pow(0.10 * len, 2) * 0.25 * len / 3.0;
+        EXPECT_NEAR(mesh::enclosedVolume(one), expected, 0.25 * expected) << a;
+        // The tip (vertex 18) is base + length * vector; the cap centre (19) is the base.
+        EXPECT_LT((openvdb::Vec3d(one.points[18]) - (bases[a] + vectors[a] * 2.0)).length(), 1e-6);
+        EXPECT_LT((openvdb::Vec3d(one.points[19]) - bases[a]).length(), 1e-6);
+    }
+    EXPECT_NEAR(colors[0][0], 1.0f, 1e-6); // +x: red 0.5 + 0.5
+}

@@ -65,6 +65,52 @@ double enclosedVolume(const Mesh& mesh)
     return v / 6.0;
 }
 
+Mesh arrows(const std::vector<openvdb::Vec3d>& bases, const std::vector<openvdb::Vec3d>& vectors,
+            double length, std::vector<openvdb::Vec3f>* colors)
+{
+    constexpr int kSides = 6;
+    Mesh m;
+    for (size_t a = 0; a < bases.size() && a < vectors.size(); ++a) {
+        const openvdb::Vec3d v = vectors[a] * length;
+        const double len = v.length();
+        if (!(len > 0.0) || !std::isfinite(len)) continue;
+        const openvdb::Vec3d dir = v / len;
+        // Two unit vectors across the arrow.
+        const openvdb::Vec3d other = std::abs(dir.x()) < 0.9 ? openvdb::Vec3d(1, 0, 0)
+                                                              : openvdb::Vec3d(0, 1, 0);
+        const openvdb::Vec3d u = dir.cross(other).unitSafe(), w = dir.cross(u);
+        const openvdb::Vec3d base = bases[a], neck = base + v * 0.75, tip = base + v;
+        const double rShaft = 0.04 * len, rHead = 0.10 * len;
+        const unsigned first = unsigned(m.points.size());
+        // Rings: shaft at the base, shaft at the neck, head at the neck; then the tip.
+        for (const auto& [centre, r] : {std::pair{base, rShaft}, {neck, rShaft}, {neck, rHead}}) {
+            for (int k = 0; k < kSides; ++k) {
+                const double phi = 2.0 * M_PI * k / kSides;
+                m.points.emplace_back(centre + (u * std::cos(phi) + w * std::sin(phi)) * r);
+            }
+        }
+        m.points.emplace_back(tip);
+        m.points.emplace_back(base); // the centre of the base cap
+        const unsigned ring0 = first, ring1 = first + kSides, ring2 = first + 2 * kSides;
+        const unsigned tipIdx = first + 3 * kSides, capIdx = tipIdx + 1;
+        for (unsigned k = 0; k < kSides; ++k) {
+            const unsigned k1 = (k + 1) % kSides;
+            // Counter-clockwise seen from outside: a closed solid per arrow.
+            m.triangles.emplace_back(ring0 + k, ring1 + k1, ring1 + k); // shaft
+            m.triangles.emplace_back(ring0 + k, ring0 + k1, ring1 + k1);
+            m.triangles.emplace_back(ring2 + k, ring2 + k1, tipIdx);    // cone
+            m.triangles.emplace_back(ring1 + k, ring2 + k1, ring2 + k); // the head's underside
+            m.triangles.emplace_back(ring1 + k, ring1 + k1, ring2 + k1);
+            m.triangles.emplace_back(capIdx, ring0 + k1, ring0 + k);    // base cap
+        }
+        if (colors) {
+            const openvdb::Vec3f c(dir * 0.5 + openvdb::Vec3d(0.5));
+            colors->insert(colors->end(), 3 * kSides + 2, c);
+        }
+    }
+    return m;
+}
+
 void writeObj(const std::string& path, const Mesh& mesh, const VertexData* data)
 {
     checkData(mesh, data, path);

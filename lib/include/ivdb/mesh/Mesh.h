@@ -27,6 +27,14 @@ Mesh meshLevelSet(const openvdb::FloatGrid& grid, double adaptivity = 0.0);
 /// into two triangles): positive for a closed mesh with outward normals.
 double enclosedVolume(const Mesh& mesh);
 
+/// @brief Arrows (a six-sided shaft and cone, 24 triangles) from each point of @a bases along
+/// @a vectors scaled by @a length: the tip is at base + length * vector; the shaft's radius is
+/// 4% and the head's 10% of the arrow's length, the head a quarter of it. Zero vectors are
+/// skipped. @a colors, if not null, receives one colour per vertex: the direction as
+/// RGB = 0.5 n + 0.5.
+Mesh arrows(const std::vector<openvdb::Vec3d>& bases, const std::vector<openvdb::Vec3d>& vectors,
+            double length, std::vector<openvdb::Vec3f>* colors = nullptr);
+
 /// @brief Optional per-vertex data for the writers: sRGB colours in [0, 1] and a scalar.
 struct VertexData
 {
