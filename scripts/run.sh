@@ -4,7 +4,8 @@
 # pipelines: the seed's figure 1 trio as grid CSG of two rasterized spheres, a grid blend, and
 # the gradient and mean curvature of figure 4's difference of two spheres; meshes of the figure 4
 # difference coloured by its mean curvature (HSV over [-50, 50]) and of the figure 5 blend,
-# gradient arrows on a sphere (figure 3), and a Blender-ready --fog copy of the figure 5 blend.
+# gradient arrows on a sphere (figure 3), a Blender-ready --fog copy of the figure 5 blend, and
+# the gallery: the five figures rendered into out/*.png.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -28,3 +29,11 @@ done
 "$ivdb" rasterize data/fig5_blend_union.json -o out/fig5_blend_union_fog.vdb --fog -q
 "$ivdb" gradient out/sphere.vdb -o out/sphere_gradient.vdb --with-input -q
 "$ivdb" glyphs out/sphere_gradient.vdb -o out/fig3_sphere_arrows.ply --stride 8
+# The gallery: the seed's five figures as images (README, docs/ holds 320x240 copies).
+for f in fig1_union fig1_intersection fig1_difference fig2_plane fig2_cylinder fig2_ellipsoid \
+         fig2_cone fig2_paraboloid fig2_hyperboloid fig5_blend_union; do
+  "$ivdb" render "out/$f.vdb" -o "out/$f.png" -q
+done
+"$ivdb" render out/sphere.vdb -o out/fig3_sphere_gradient.png --color-by out/sphere_gradient.vdb -q
+"$ivdb" render out/fig1_difference.vdb -o out/fig4_difference_curvature.png \
+  --color-by out/fig1_difference_curvature.vdb:curvature --colormap hsv --range=-50,50 -q

@@ -157,3 +157,36 @@ TEST_F(TestCliMesh, GlyphsPointAlongTheGradient)
 }
 
 } // namespace
+
+namespace {
+
+TEST_F(TestCliMesh, RenderWritesImagesAndRefusesBadArguments)
+{
+    ASSERT_EQ(runIvdb(mDir, {"rasterize", "s.json", "-o", "s.vdb", "-q"}).exitCode, 0);
+    ASSERT_EQ(runIvdb(mDir, {"gradient", "s.vdb", "-o", "g.vdb", "-q"}).exitCode, 0);
+    auto r = runIvdb(mDir, {"render", "s.vdb", "-o", "a.png", "--size", "80x60", "--color-by",
+                            "s.vdb:surface", "--colormap", "coolwarm", "--range=-0.1,0.1"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(slurpFile(mDir / "a.png").substr(1, 3), "PNG");
+    r = runIvdb(mDir, {"render", "s.vdb", "-o", "a.exr", "--size", "80x60", "--camera",
+                       "eye=0,0,4,target=0,0,0,fov=30", "--color-by", "g.vdb", "-q"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(slurpFile(mDir / "a.exr").substr(0, 4), std::string("\x76\x2f\x31\x01", 4));
+    const std::vector<std::pair<std::vector<std::string>, std::string>> bad = {
+        {{"render", "s.vdb", "-o", "x.png", "--colormap", "jet"}, "colormap 'jet'"},
+        {{"render", "s.vdb", "-o", "x.png", "--color-by", "s.vdb", "--range", "1,0"}, "LO < HI"},
+        {{"render", "s.vdb", "-o", "x.png", "--size", "0x10"}, "--size"},
+        {{"render", "s.vdb", "-o", "x.png", "--color-by", "g.vdb", "--range", "0,1"}, "scalar grids only"},
+        {{"render", "s.vdb", "-o", "x.png", "--camera", "eye=1,2"}, "x,y,z"},
+        {{"render", "s.vdb", "-o", "x.jpg"}, ".png or .exr"},
+        {{"render", "s.vdb", "-o", "no/such/folder/x.png"}, "no/such/folder"},
+    };
+    for (const auto& [args, mention] : bad) {
+        r = runIvdb(mDir, args);
+        EXPECT_NE(r.exitCode, 0) << mention;
+        EXPECT_NE(r.err.find(mention), std::string::npos) << "expected '" << mention << "' in " << r.err;
+        EXPECT_FALSE(fs::exists(mDir / "x.png")) << mention;
+    }
+}
+
+} // namespace

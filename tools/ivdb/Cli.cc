@@ -176,6 +176,7 @@ int run(int argc, char** argv)
         addBlend(app, action);
         addMesh(app, action);
         addGlyphs(app, action);
+        addRender(app, action);
         addBench(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {
@@ -185,7 +186,7 @@ int run(int argc, char** argv)
             const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
             if (subs.empty()) {
                 std::cerr << "ivdb: error: unknown command '" << a
-                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, mesh, glyphs, bench (run 'ivdb --help')" << std::endl;
+                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, mesh, glyphs, render, bench (run 'ivdb --help')" << std::endl;
                 return 2;
             }
             break;

@@ -37,6 +37,7 @@ void addBlend(CLI::App& app, Action& action);
 void addBench(CLI::App& app, Action& action);
 void addMesh(CLI::App& app, Action& action);
 void addGlyphs(CLI::App& app, Action& action);
+void addRender(CLI::App& app, Action& action);
 /// @}
 
 /// @brief Rasterizer settings from a scene and the command line's --voxel-size and --half-width.

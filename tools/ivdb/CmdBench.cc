@@ -291,7 +291,7 @@ int runBench(const BenchOptions& opt)
     }
     const fs::path out(opt.out);
     std::error_code ec;
-    fs::create_directories(out / "scenes", ec);
+    fs::create_directories(opt.scenes.empty() ? out / "scenes" : out, ec);
     if (ec) throw std::runtime_error(opt.out + ": cannot create the folder: " + ec.message());
     const std::string csvPath = (out / "bench.csv").string(), pngPath = (out / "bench.png").string();
     io::checkOutputPath(csvPath);
@@ -378,10 +378,8 @@ int runBench(const BenchOptions& opt)
         }
     }
 
-    // The CSV, atomically (temporary file, then rename).
-    {
-        const std::string tmp = csvPath + ".tmp";
-        std::ofstream f(tmp);
+    // The CSV, atomically.
+    io::writeFileAtomically(csvPath, [&](std::ostream& f) {
         f << "scene,method,resolution,voxel_size,reps,time_s,time_min_s,peak_memory_bytes,"
              "work_memory_bytes,active_voxels,dense_voxels,grid_bytes,file_bytes,status\n";
         f.precision(9);
@@ -391,13 +389,7 @@ int runBench(const BenchOptions& opt)
               << r.work << ',' << r.active << ',' << r.denseVoxels << ',' << r.gridBytes << ','
               << r.fileBytes << ',' << csvField(r.status) << '\n';
         }
-        f.close();
-        if (!f) {
-            fs::remove(tmp, ec);
-            throw std::runtime_error(csvPath + ": cannot write");
-        }
-        fs::rename(tmp, csvPath);
-    }
+    });
 
     // The table.
     auto find = [&](const std::string& scene, const std::string& method, int res) -> const Row* {

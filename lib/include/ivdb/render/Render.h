@@ -1,0 +1,63 @@
+#pragma once
+
+#include <ivdb/render/Colormap.h>
+
+#include <openvdb/openvdb.h>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace ivdb::render {
+
+/// @brief A pinhole camera in world space; @a fov is the vertical field of view in degrees.
+struct Camera
+{
+    openvdb::Vec3d eye{0.0, 0.0, 5.0}, target{0.0};
+    double fov = 40.0;
+};
+
+/// @brief A camera that frames @a grid's active voxels: looking at their centre from the
+/// direction (1, 0.8, 1.3) (above and to the side), far enough that the bounding sphere fits.
+Camera frameGrid(const openvdb::FloatGrid& grid, int width, int height, double fov = 40.0);
+
+struct RenderSettings
+{
+    int width = 640, height = 480;
+    Camera camera;
+    /// Colour the surface by a scalar grid through @a colormap over [lo, hi], or by a vector
+    /// grid's direction; neither: light grey.
+    openvdb::FloatGrid::ConstPtr colorScalar;
+    openvdb::Vec3SGrid::ConstPtr colorVector;
+    std::optional<Colormap> colormap;
+    double lo = 0.0, hi = 1.0;
+};
+
+/// @brief A rendered image: rows top to bottom. Colours are sRGB-encoded in [0, 1] (as a PNG
+/// stores them); alpha is 1 on the surface, 0 on the background; depth is the world distance
+/// from the eye (infinity on the background); normals are world-space unit vectors.
+struct Image
+{
+    int width = 0, height = 0;
+    std::vector<openvdb::Vec3f> rgb, normal;
+    std::vector<float> alpha, depth;
+};
+
+/// @brief Ray-trace the zero surface of a level set (openvdb::tools::LevelSetRayIntersector),
+/// one ray a pixel, in parallel over rows; Lambert shading from a light above the eye.
+/// @throw openvdb::ValueError for a size outside [1, 16384] or a degenerate camera
+Image renderLevelSet(const openvdb::FloatGrid& grid, const RenderSettings& settings);
+
+/// @brief Draw a vertical colour bar of @a map (low at the bottom) at the right of @a image.
+void drawColorBar(Image& image, const Colormap& map);
+
+/// @brief 8-bit sRGB RGBA PNG through libpng, written atomically.
+/// @throw openvdb::IoError naming the path
+void writePng(const std::string& path, const Image& image);
+
+/// @brief OpenEXR with linear R, G, B, A (half or float), Z (depth) and N.X, N.Y, N.Z (normal),
+/// written atomically.
+/// @throw openvdb::IoError naming the path
+void writeExr(const std::string& path, const Image& image, bool halfFloat = true);
+
+} // namespace ivdb::render
