@@ -177,6 +177,7 @@ TEST_F(TestCliMesh, RenderWritesImagesAndRefusesBadArguments)
         {{"render", "s.vdb", "-o", "x.png", "--color-by", "s.vdb", "--range", "1,0"}, "LO < HI"},
         {{"render", "s.vdb", "-o", "x.png", "--size", "0x10"}, "--size"},
         {{"render", "s.vdb", "-o", "x.png", "--color-by", "g.vdb", "--range", "0,1"}, "scalar grids only"},
+        {{"render", "s.vdb", "-o", "x.png", "--color-by", "g.vdb", "--colormap", "viridis"}, "scalar grids only"},
         {{"render", "s.vdb", "-o", "x.png", "--camera", "eye=1,2"}, "x,y,z"},
         {{"render", "s.vdb", "-o", "x.jpg"}, ".png or .exr"},
         {{"render", "s.vdb", "-o", "no/such/folder/x.png"}, "no/such/folder"},

@@ -25,7 +25,7 @@ struct MeshOptions
 {
     std::string input, output, grid, colorBy, colormap = "viridis", range;
     double adaptivity = 0.0;
-    bool quiet = false;
+    bool quiet = false, colormapGiven = false;
 };
 
 std::string extensionOf(const std::string& path)
@@ -124,6 +124,11 @@ int runMesh(const MeshOptions& opt)
             }
         } else {
             // A vector grid (a gradient): colour by direction, the scalar is the magnitude.
+            if (range || opt.colormapGiven) {
+                throw std::runtime_error(colorPath + ": grid '" + colorGrid->getName() + "' is a "
+                                         "vector grid, coloured by direction: --colormap and "
+                                         "--range apply to scalar grids only");
+            }
             auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(colorGrid);
             data.scalarName = "magnitude";
             openvdb::tools::GridSampler<openvdb::Vec3SGrid, openvdb::tools::BoxSampler> s(*v);
@@ -171,7 +176,10 @@ void addMesh(CLI::App& app, Action& action)
                     "LO,HI: the values mapped to the colormap's ends (default: the sampled "
                     "values' range)");
     cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
-    cmd->callback([&action, opt]() { action = [opt]() { return runMesh(*opt); }; });
+    cmd->callback([&action, opt, cmd]() {
+        opt->colormapGiven = cmd->count("--colormap") > 0;
+        action = [opt]() { return runMesh(*opt); };
+    });
 }
 
 } // namespace ivdb::cli

@@ -24,7 +24,7 @@ namespace fs = std::filesystem;
 struct RenderOptions
 {
     std::string input, output, grid, size = "640x480", camera, colorBy, colormap = "hsv", range;
-    bool quiet = false;
+    bool quiet = false, floatExr = false, colormapGiven = false;
 };
 
 std::vector<double> numbers(const std::string& text, char sep, const std::string& what)
@@ -138,9 +138,10 @@ int runRender(const RenderOptions& opt)
                 s.hi = mm.max() > mm.min() ? double(mm.max()) : s.lo + 1.0;
             }
         } else if (auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(g)) {
-            if (range) {
+            if (range || opt.colormapGiven) {
                 throw std::runtime_error(path + ": grid '" + g->getName() + "' is a vector grid, "
-                                         "coloured by direction: --range applies to scalar grids only");
+                                         "coloured by direction: --colormap and --range apply to "
+                                         "scalar grids only");
             }
             s.colorVector = v;
         } else {
@@ -151,7 +152,7 @@ int runRender(const RenderOptions& opt)
     render::Image image = render::renderLevelSet(*surface, s);
     if (scalar && ext == ".png") render::drawColorBar(image, *s.colormap);
     if (ext == ".png") render::writePng(opt.output, image);
-    else render::writeExr(opt.output, image);
+    else render::writeExr(opt.output, image, !opt.floatExr);
     if (!opt.quiet) {
         size_t hits = 0;
         for (float a : image.alpha) hits += a > 0.0f;
@@ -181,10 +182,14 @@ void addRender(CLI::App& app, Action& action)
                     "FILE.vdb[:GRID]: colour the surface by a scalar grid through the colormap "
                     "(with a colour bar on PNG), or by a vector grid's direction");
     cmd->add_option("--colormap", opt->colormap, "hsv, viridis, coolwarm or gray")->capture_default_str();
+    cmd->add_flag("--float", opt->floatExr, "EXR colour and alpha as 32-bit float (default half)");
     cmd->add_option("--range", opt->range, "LO,HI mapped to the colormap's ends (default: the grid's "
                     "active value range)");
     cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
-    cmd->callback([&action, opt]() { action = [opt]() { return runRender(*opt); }; });
+    cmd->callback([&action, opt, cmd]() {
+        opt->colormapGiven = cmd->count("--colormap") > 0;
+        action = [opt]() { return runRender(*opt); };
+    });
 }
 
 } // namespace ivdb::cli
