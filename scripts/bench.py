@@ -8,7 +8,7 @@ Measures, in one run and interleaved so machine noise hits both sides alike:
     build/bin/ivdb_bench, median of repetitions);
   * end to end: `ivdb rasterize` vs `vdb_tool -sphere ... -write` (start, compute, write);
   * sparse vs dense: wall time and peak memory of `ivdb rasterize` at several resolutions.
-Section "csg" (two overlapping radius-400 spheres):
+Section "csg" (two overlapping radius-400 spheres; also rendering one of them vs vdb_render):
   * combine step: ops::csgInPlace vs openvdb::tools::csgUnion (Google Benchmark);
   * end to end: `ivdb csg union A B` vs `vdb_tool -read A B -union -write`;
   * blend vs sharp (radius 100, p chosen so the band extension is 2 voxels).
@@ -125,6 +125,17 @@ def bench_csg(tmp, big, reps):
     print("|---|---|---|---|")
     print(f"| wall time | {t['ivdb']:.2f} s | {t['vdb_tool']:.2f} s | **{t['vdb_tool'] / t['ivdb']:.2f}x faster** |")
     print(f"| peak memory | {m['ivdb']:.0f} MB | {m['vdb_tool']:.0f} MB | {m['vdb_tool'] / m['ivdb']:.2f}x less |\n")
+    # Rendering one of the spheres at 640x480 with the same camera (issue 5's comparison).
+    png_a, png_b = os.path.join(tmp, "ra.png"), os.path.join(tmp, "rb.png")
+    t, m = median_runs({
+        "ivdb": [IVDB, "render", a, "-o", png_a, "-q", "--camera",
+                 "eye=-0.35,0,4,target=-0.35,0,0,fov=40"],
+        "vdb_render": ["vdb_render", a, png_b, "-res", "640x480", "-translate", "-0.35,0,4",
+                       "-lookat", "-0.35,0,0", "-fov", "40"],
+    }, reps)
+    print("| end to end, render a radius-%d sphere at 640x480 | ivdb render | vdb_render | ivdb is |" % big)
+    print("|---|---|---|---|")
+    print(f"| wall time | {t['ivdb']:.2f} s | {t['vdb_render']:.2f} s | **{t['vdb_render'] / t['ivdb']:.2f}x faster** |\n")
     p6 = int(0.8 * big)
     t, m = median_runs({
         "csg": [IVDB, "csg", "union", a, b, "-o", out_a, "-q"],

@@ -4,9 +4,11 @@
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <filesystem>
@@ -188,6 +190,51 @@ TEST_F(TestCliMesh, RenderWritesImagesAndRefusesBadArguments)
         EXPECT_NE(r.err.find(mention), std::string::npos) << "expected '" << mention << "' in " << r.err;
         EXPECT_FALSE(fs::exists(mDir / "x.png")) << mention;
     }
+}
+
+} // namespace
+
+namespace {
+
+// The PLY's per-vertex scalar is the colouring grid at the vertex (OpenVDB's own trilinear
+// sampler as the reference), and its colour is that value through the colormap.
+TEST_F(TestCliMesh, PlyScalarIsTheGridAtEachVertex)
+{
+    ASSERT_EQ(runIvdb(mDir, {"rasterize", "s.json", "-o", "s.vdb", "-q"}).exitCode, 0);
+    ASSERT_EQ(runIvdb(mDir, {"curvature", "s.vdb", "-o", "c.vdb", "-q"}).exitCode, 0);
+    const auto r = runIvdb(mDir, {"mesh", "s.vdb", "-o", "c.ply", "--color-by", "c.vdb:curvature",
+                                  "--colormap", "gray", "--range", "0,2", "-q"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    openvdb::io::File f((mDir / "c.vdb").string());
+    f.open();
+    auto curv = openvdb::gridPtrCast<openvdb::FloatGrid>(f.readGrid("curvature"));
+    f.close();
+    ASSERT_TRUE(curv);
+    openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(*curv);
+
+    std::ifstream in(mDir / "c.ply", std::ios::binary);
+    std::string line;
+    size_t vertices = 0;
+    while (std::getline(in, line) && line != "end_header") {
+        std::sscanf(line.c_str(), "element vertex %zu", &vertices);
+    }
+    ASSERT_GT(vertices, 1000u);
+    double meanCurvature = 0.0;
+    for (size_t i = 0; i < vertices; ++i) {
+        float xyz[3], s;
+        unsigned char rgb[3];
+        in.read(reinterpret_cast<char*>(xyz), sizeof(xyz));
+        in.read(reinterpret_cast<char*>(rgb), 3);
+        in.read(reinterpret_cast<char*>(&s), sizeof(s));
+        ASSERT_TRUE(in);
+        ASSERT_EQ(s, float(sampler.wsSample(openvdb::Vec3d(xyz[0], xyz[1], xyz[2])))) << i;
+        // gray over [0, 2]: matplotlib's 256-entry table, index min(int(t * 256), 255).
+        const int index = std::min(int(std::clamp(s / 2.0, 0.0, 1.0) * 256), 255);
+        ASSERT_EQ(int(rgb[0]), index) << i;
+        meanCurvature += s;
+    }
+    // A unit sphere's mean curvature is 1.
+    EXPECT_NEAR(meanCurvature / double(vertices), 1.0, 0.05);
 }
 
 } // namespace
