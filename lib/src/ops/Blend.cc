@@ -61,7 +61,11 @@ std::vector<Coord> leafOrigins(const MaskTree& mask)
     out.reserve(size_t(mask.activeVoxelCount()));
     for (auto it = mask.cbeginValueOn(); it; ++it) {
         const openvdb::CoordBBox box = it.getBoundingBox(); // a voxel, or a tile of them
-        for (auto c = box.begin(); c; ++c) out.push_back(*c << kLeafLog2);
+        // Multiplied, not shifted: shifting a negative coordinate left is undefined in C++17.
+        for (auto c = box.begin(); c; ++c) {
+            const Coord v = *c;
+            out.emplace_back(v.x() * kLeafDim, v.y() * kLeafDim, v.z() * kLeafDim);
+        }
     }
     return out;
 }
