@@ -13,6 +13,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <filesystem>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
@@ -149,6 +150,55 @@ ops::CsgOp csgOp(const std::string& word)
     return word == "union" ? ops::CsgOp::Union
          : word == "intersection" ? ops::CsgOp::Intersection
                                   : ops::CsgOp::Difference;
+}
+
+// "LO,HI" with LO < HI, both finite.
+std::pair<double, double> parseRange(const std::string& text)
+{
+    const auto comma = text.find(',');
+    double lo = std::nan(""), hi = std::nan("");
+    try {
+        if (comma != std::string::npos) {
+            size_t n1 = 0, n2 = 0;
+            lo = std::stod(text.substr(0, comma), &n1);
+            hi = std::stod(text.substr(comma + 1), &n2);
+            if (n1 != comma || n2 != text.size() - comma - 1) lo = hi = std::nan("");
+        }
+    } catch (const std::exception&) {
+        lo = hi = std::nan("");
+    }
+    if (!std::isfinite(lo) || !std::isfinite(hi)) {
+        throw std::runtime_error("--range must be LO,HI (two finite numbers), got '" + text + "'");
+    }
+    if (!(lo < hi)) {
+        throw std::runtime_error("--range needs LO < HI, got " + util::formatNumber(lo) + "," +
+                                 util::formatNumber(hi));
+    }
+    return {lo, hi};
+}
+
+openvdb::GridBase::Ptr readColorGrid(const std::string& spec, bool withRange, bool withColormap)
+{
+    std::string path = spec, name;
+    const auto colon = spec.rfind(':');
+    if (!std::filesystem::exists(spec) && colon != std::string::npos) {
+        path = spec.substr(0, colon);
+        name = spec.substr(colon + 1);
+    }
+    const openvdb::GridPtrVec grids = io::readVdb(path);
+    if (grids.empty()) throw std::runtime_error(path + ": the file holds no grid");
+    openvdb::GridBase::Ptr g = name.empty() ? grids.front() : io::selectGrid(grids, path, name);
+    if (g->isType<openvdb::Vec3SGrid>()) {
+        if (withRange || withColormap) {
+            throw std::runtime_error(path + ": grid '" + g->getName() + "' is a vector grid, "
+                                     "coloured by direction: --colormap and --range apply to "
+                                     "scalar grids only");
+        }
+    } else if (!g->isType<openvdb::FloatGrid>()) {
+        throw std::runtime_error(path + ": grid '" + g->getName() + "' is a " + g->valueType() +
+                                 " grid; --color-by needs a float (scalar) or vec3s (vector) grid");
+    }
+    return g;
 }
 
 void printNotes(const std::vector<std::string>& notes)

@@ -86,6 +86,16 @@ void writeOutput(const std::string& path, const openvdb::GridCPtrVec& grids);
 /// @brief "union" | "intersection" | "difference" (the CLI checked the word) as an operation.
 ops::CsgOp csgOp(const std::string& word);
 
+/// @brief `--range LO,HI`: two finite numbers with LO < HI.
+/// @throw std::runtime_error naming --range and the text
+std::pair<double, double> parseRange(const std::string& text);
+
+/// @brief The grid of `--color-by FILE.vdb[:GRID]` (a path that exists is taken whole; without
+/// GRID the file's first grid), checked to be float (scalar) or vec3s (vector). A vector grid is
+/// coloured by direction, so @a withRange or @a withColormap (given explicitly) is refused.
+/// @throw std::runtime_error or openvdb::Exception naming the file and grid
+openvdb::GridBase::Ptr readColorGrid(const std::string& spec, bool withRange, bool withColormap);
+
 /// @brief Print each note as `ivdb: note: ...` on stderr.
 void printNotes(const std::vector<std::string>& notes);
 

@@ -35,31 +35,6 @@ std::string extensionOf(const std::string& path)
     return e;
 }
 
-// "LO,HI" with LO < HI, both finite.
-std::pair<double, double> parseRange(const std::string& text)
-{
-    const auto comma = text.find(',');
-    double lo = std::nan(""), hi = std::nan("");
-    try {
-        if (comma != std::string::npos) {
-            size_t n1 = 0, n2 = 0;
-            lo = std::stod(text.substr(0, comma), &n1);
-            hi = std::stod(text.substr(comma + 1), &n2);
-            if (n1 != comma || n2 != text.size() - comma - 1) lo = hi = std::nan("");
-        }
-    } catch (const std::exception&) {
-        lo = hi = std::nan("");
-    }
-    if (!std::isfinite(lo) || !std::isfinite(hi)) {
-        throw std::runtime_error("--range must be LO,HI (two finite numbers), got '" + text + "'");
-    }
-    if (!(lo < hi)) {
-        throw std::runtime_error("--range needs LO < HI, got " + util::formatNumber(lo) + "," +
-                                 util::formatNumber(hi));
-    }
-    return {lo, hi};
-}
-
 int runMesh(const MeshOptions& opt)
 {
     const auto t0 = std::chrono::steady_clock::now();
@@ -77,28 +52,8 @@ int runMesh(const MeshOptions& opt)
     io::checkOutputPath(opt.output);
 
     openvdb::FloatGrid::Ptr surface = readLevelSet(opt.input, opt.grid);
-    // The colouring grid: FILE.vdb or FILE.vdb:GRID (a path that exists is taken whole).
     openvdb::GridBase::Ptr colorGrid;
-    std::string colorPath = opt.colorBy, colorName;
-    if (!opt.colorBy.empty()) {
-        const auto colon = opt.colorBy.rfind(':');
-        if (!fs::exists(opt.colorBy) && colon != std::string::npos) {
-            colorPath = opt.colorBy.substr(0, colon);
-            colorName = opt.colorBy.substr(colon + 1);
-        }
-        const openvdb::GridPtrVec grids = io::readVdb(colorPath);
-        if (colorName.empty()) {
-            if (grids.empty()) throw std::runtime_error(colorPath + ": the file holds no grid");
-            colorGrid = grids.front();
-        } else {
-            colorGrid = io::selectGrid(grids, colorPath, colorName);
-        }
-        if (!colorGrid->isType<openvdb::FloatGrid>() && !colorGrid->isType<openvdb::Vec3SGrid>()) {
-            throw std::runtime_error(colorPath + ": grid '" + colorGrid->getName() + "' is a " +
-                                     colorGrid->valueType() + " grid; --color-by needs a float "
-                                     "(scalar) or vec3s (vector) grid");
-        }
-    }
+    if (!opt.colorBy.empty()) colorGrid = readColorGrid(opt.colorBy, bool(range), opt.colormapGiven);
 
     const mesh::Mesh m = mesh::meshLevelSet(*surface, opt.adaptivity);
     if (m.faceCount() == 0) {
@@ -124,11 +79,6 @@ int runMesh(const MeshOptions& opt)
             }
         } else {
             // A vector grid (a gradient): colour by direction, the scalar is the magnitude.
-            if (range || opt.colormapGiven) {
-                throw std::runtime_error(colorPath + ": grid '" + colorGrid->getName() + "' is a "
-                                         "vector grid, coloured by direction: --colormap and "
-                                         "--range apply to scalar grids only");
-            }
             auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(colorGrid);
             data.scalarName = "magnitude";
             openvdb::tools::GridSampler<openvdb::Vec3SGrid, openvdb::tools::BoxSampler> s(*v);

@@ -98,14 +98,7 @@ int runRender(const RenderOptions& opt)
         }
     }
     std::optional<std::pair<double, double>> range;
-    if (!opt.range.empty()) {
-        const auto v = numbers(opt.range, ',', "--range");
-        if (v.size() != 2) throw std::runtime_error("--range must be LO,HI, got '" + opt.range + "'");
-        if (!(v[0] < v[1])) {
-            throw std::runtime_error("--range needs LO < HI, got " + opt.range);
-        }
-        range = std::make_pair(v[0], v[1]);
-    }
+    if (!opt.range.empty()) range = parseRange(opt.range);
     render::RenderSettings s;
     s.width = w;
     s.height = h;
@@ -117,15 +110,7 @@ int runRender(const RenderOptions& opt)
     if (!opt.camera.empty()) s.camera = parseCamera(opt.camera, s.camera);
     bool scalar = false;
     if (!opt.colorBy.empty()) {
-        std::string path = opt.colorBy, name;
-        const auto colon = opt.colorBy.rfind(':');
-        if (!fs::exists(opt.colorBy) && colon != std::string::npos) {
-            path = opt.colorBy.substr(0, colon);
-            name = opt.colorBy.substr(colon + 1);
-        }
-        const openvdb::GridPtrVec grids = io::readVdb(path);
-        if (grids.empty()) throw std::runtime_error(path + ": the file holds no grid");
-        openvdb::GridBase::Ptr g = name.empty() ? grids.front() : io::selectGrid(grids, path, name);
+        const openvdb::GridBase::Ptr g = readColorGrid(opt.colorBy, bool(range), opt.colormapGiven);
         if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(g)) {
             s.colorScalar = f;
             scalar = true;
@@ -137,16 +122,8 @@ int runRender(const RenderOptions& opt)
                 s.lo = mm.min();
                 s.hi = mm.max() > mm.min() ? double(mm.max()) : s.lo + 1.0;
             }
-        } else if (auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(g)) {
-            if (range || opt.colormapGiven) {
-                throw std::runtime_error(path + ": grid '" + g->getName() + "' is a vector grid, "
-                                         "coloured by direction: --colormap and --range apply to "
-                                         "scalar grids only");
-            }
-            s.colorVector = v;
         } else {
-            throw std::runtime_error(path + ": grid '" + g->getName() + "' is a " + g->valueType() +
-                                     " grid; --color-by needs a float (scalar) or vec3s (vector) grid");
+            s.colorVector = openvdb::GridBase::grid<openvdb::Vec3SGrid>(g);
         }
     }
     render::Image image = render::renderLevelSet(*surface, s);
