@@ -8,9 +8,25 @@
 #include <string>
 #include <vector>
 
+#include <chrono>
+#include <csignal>
+
+#include <fcntl.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 namespace ivdb::test {
+
+#ifdef IVDB_SANITIZED
+/// Sanitized binaries run several times slower and reserve terabytes of address space (ASan's
+/// shadow), so runs get longer timeouts and no address-space cap.
+inline constexpr int kSlowdown = 8;
+inline constexpr const char* kAddressCap = "";
+#else
+inline constexpr int kSlowdown = 1;
+/// A 3 GB address-space cap, so a runaway run fails instead of swapping.
+inline constexpr const char* kAddressCap = "ulimit -v 3000000 && ";
+#endif
 
 struct CliResult
 {
@@ -24,23 +40,73 @@ inline std::string slurpFile(const std::filesystem::path& p)
     return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
-/// Run `ivdb ARGS` in @a dir (killed after @a timeoutSeconds), with stdin from /dev/null.
+/// Run `ivdb ARGS` in @a dir (killed after @a timeoutSeconds), with stdin from /dev/null;
+/// @a shellPrefix runs first in the same shell (e.g. "ulimit -f 4 && ").
 inline CliResult runIvdb(const std::filesystem::path& dir, const std::vector<std::string>& args,
-                         int timeoutSeconds = 120)
+                         int timeoutSeconds = 120, const std::string& shellPrefix = "")
 {
-    std::string cmd = "cd '" + dir.string() + "' && exec timeout -s KILL " +
-                      std::to_string(timeoutSeconds) + " '" + std::string(IVDB_BINARY) + "'";
+    std::string cmd = "cd '" + dir.string() + "' && " + shellPrefix + "exec timeout -s KILL " +
+                      std::to_string(timeoutSeconds * kSlowdown) + " '" + std::string(IVDB_BINARY) + "'";
     for (const auto& a : args) cmd += " '" + a + "'";
     const std::filesystem::path out = dir / ".stdout.txt", err = dir / ".stderr.txt";
     cmd += " >'" + out.string() + "' 2>'" + err.string() + "' </dev/null";
     const int status = std::system(cmd.c_str());
     CliResult r;
+    // timeout(1) exits 128 + 9 when it had to kill the run; a signal inside ivdb also shows >= 128.
     r.exitCode = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : 1000;
     r.out = slurpFile(out);
     r.err = slurpFile(err);
     std::filesystem::remove(out);
     std::filesystem::remove(err);
     return r;
+}
+
+/// Start `ivdb ARGS` in @a dir without waiting (stdout and stderr to @a dir/.out.txt and
+/// .err.txt, stdin from /dev/null); returns its process id.
+inline pid_t spawnIvdb(const std::filesystem::path& dir, const std::vector<std::string>& args)
+{
+    std::vector<std::string> argv{IVDB_BINARY};
+    argv.insert(argv.end(), args.begin(), args.end());
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        if (::chdir(dir.c_str()) != 0) ::_exit(127);
+        const int in = ::open("/dev/null", O_RDONLY);
+        const int out = ::open(".out.txt", O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        const int err = ::open(".err.txt", O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (in < 0 || out < 0 || err < 0) ::_exit(127);
+        ::dup2(in, 0);
+        ::dup2(out, 1);
+        ::dup2(err, 2);
+        std::vector<char*> cargs;
+        for (auto& a : argv) cargs.push_back(a.data());
+        cargs.push_back(nullptr);
+        ::execv(cargs[0], cargs.data());
+        ::_exit(127);
+    }
+    return pid;
+}
+
+/// Wait up to @a seconds for @a pid; kills it (SIGKILL) on timeout. Returns the exit code, 128 +
+/// the signal that ended it, or 1000 on timeout.
+inline int waitIvdb(pid_t pid, double seconds)
+{
+    const auto start = std::chrono::steady_clock::now();
+    for (;;) {
+        int status = 0;
+        const pid_t r = ::waitpid(pid, &status, WNOHANG);
+        if (r == pid) {
+            if (WIFEXITED(status)) return WEXITSTATUS(status);
+            if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
+        }
+        if (r < 0) return 1000;
+        const std::chrono::duration<double> waited = std::chrono::steady_clock::now() - start;
+        if (waited.count() > seconds) {
+            ::kill(pid, SIGKILL);
+            ::waitpid(pid, &status, 0);
+            return 1000;
+        }
+        ::usleep(1000);
+    }
 }
 
 } // namespace ivdb::test

@@ -1,5 +1,7 @@
 // End-to-end runs of the ivdb binary: exit codes, stdout and stderr text, and the files left
 // behind (none on failure; an existing output untouched).
+#include "CliRun.h"
+
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
@@ -67,7 +69,8 @@ protected:
         const fs::path outFile = mDir / "stdout.txt", errFile = mDir / "stderr.txt";
         // bounded: 60 s and 3 GB of address space, so a runaway run fails instead of hanging
         std::string cmd = "cd " + quote((mDir / "run").string()) +
-                          " && ulimit -v 3000000 && exec timeout -s KILL 60 " + quote(IVDB_BINARY);
+                          " && " + std::string(ivdb::test::kAddressCap) + "exec timeout -s KILL " +
+                          std::to_string(60 * ivdb::test::kSlowdown) + " " + quote(IVDB_BINARY);
         for (const auto& a : args) cmd += " " + quote(a);
         cmd += " >" + quote(outFile.string()) + " 2>" + quote(errFile.string()) + " </dev/null";
         const int status = std::system(cmd.c_str());

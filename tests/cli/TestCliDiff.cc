@@ -1,6 +1,8 @@
 // End-to-end runs of ivdb gradient, curvature and compare-gradient: the grids written (read back
 // with OpenVDB), their values next to the surface, --help, and the errors for bad input (non-zero
 // exit, `ivdb: error: ` message, no output file, an existing output untouched).
+#include "CliRun.h"
+
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 
@@ -68,7 +70,8 @@ protected:
     {
         const fs::path outFile = mDir / "stdout.txt", errFile = mDir / "stderr.txt";
         std::string cmd = "cd " + quote((mDir / "run").string()) +
-                          " && ulimit -v 3000000 && exec timeout -s KILL 60 " + quote(IVDB_BINARY);
+                          " && " + std::string(ivdb::test::kAddressCap) + "exec timeout -s KILL " +
+                          std::to_string(60 * ivdb::test::kSlowdown) + " " + quote(IVDB_BINARY);
         for (const auto& a : args) cmd += " " + quote(a);
         cmd += " >" + quote(outFile.string()) + " 2>" + quote(errFile.string()) + " </dev/null";
         const int status = std::system(cmd.c_str());

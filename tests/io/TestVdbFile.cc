@@ -383,7 +383,8 @@ TEST_F(TestVdbFile, DescribeGrid)
     EXPECT_GT(info.activeVoxels, 0u);
     EXPECT_EQ(info.leafNodes, grid->tree().leafCount());
     EXPECT_EQ(info.indexBox, grid->evalActiveVoxelBoundingBox());
-    EXPECT_NEAR(info.background, 3 * 0.05, 1e-6);
+    ASSERT_EQ(info.background.size(), 1u);
+    EXPECT_NEAR(info.background[0], 3 * 0.05, 1e-6);
     EXPECT_GT(info.memoryBytes, 0u);
     // world box: the index box in world units; the sphere (r 1 at (0.1, -0.2, 0.3)) plus the band
     const openvdb::Vec3d c(0.1, -0.2, 0.3);

@@ -268,14 +268,14 @@ TEST_F(TestRasterize, DenseRefusesWhatDoesNotFit)
     raster::RasterSettings s = settings(0.01, 3.0, raster::Sampling::Dense);
     const std::uint64_t need = raster::denseMemoryEstimate(sphere, s);
     EXPECT_GE(need, 4ull * 200 * 200 * 200);  // at least the 200^3 voxels around the sphere
-    s.denseMemoryLimit = need - 1;
+    s.memoryLimit = need - 1;
     try {
         raster::rasterize(sphere, s);
         FAIL() << "dense sampling over its memory limit must be refused";
     } catch (const openvdb::RuntimeError& e) {
         EXPECT_NE(std::string(e.what()).find("needs about"), std::string::npos) << e.what();
     }
-    s.denseMemoryLimit = need;
+    s.memoryLimit = need;
     EXPECT_GT(raster::rasterize(sphere, s)->activeVoxelCount(), 0u);
 }
 

@@ -25,37 +25,67 @@ namespace ivdb::cli {
 
 namespace {
 
+// Signals. SIGINT, SIGTERM and SIGHUP end a run promptly and leave no partial output:
+// - while an operation polls its interrupter (Progress, between start() and end()), the first
+//   signal only sets gInterrupted; the operation stops through OpenVDB's interrupter mechanism
+//   and run() returns 128 + the signal;
+// - at any other moment (reading, writing, operations without an interrupter), and for a second
+//   signal, the handler removes the temporary output being written and ends the process at once.
 std::atomic<bool> gInterrupted{false};
+volatile std::sig_atomic_t gCooperative = 0;
+volatile std::sig_atomic_t gSignal = 0;
 
-extern "C" void onSigint(int)
+[[noreturn]] void exitOnSignal(int sig)
 {
-    // The first Ctrl-C asks the running operation to stop; a second one kills the process.
-    gInterrupted = true;
-    std::signal(SIGINT, SIG_DFL);
+    io::removePendingTemporaryFile();
+    static const char msg[] = "ivdb: error: interrupted; nothing was written\n";
+    [[maybe_unused]] const ssize_t n = ::write(2, msg, sizeof(msg) - 1);
+    ::_exit(128 + sig);
+}
+
+extern "C" void onSignal(int sig)
+{
+    gSignal = sig;
+    if (gCooperative && !gInterrupted.load()) {
+        gInterrupted = true;
+        return;
+    }
+    exitOnSignal(sig);
+}
+
+void installSignalHandlers()
+{
+    struct sigaction sa {};
+    sa.sa_handler = onSignal;
+    sigemptyset(&sa.sa_mask);
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) ::sigaction(sig, &sa, nullptr);
+    // A file-size limit (ulimit -f) then fails the write with EFBIG, reported like a full disk,
+    // instead of killing the process mid-file.
+    std::signal(SIGXFSZ, SIG_IGN);
 }
 
 } // namespace
 
-Progress::Progress(std::string label): mLabel(std::move(label)), mTerminal(::isatty(2) == 1)
-{
-    gInterrupted = false;
-    std::signal(SIGINT, onSigint);
-}
+Progress::Progress(std::string label): mLabel(std::move(label)), mTerminal(::isatty(2) == 1) {}
 
 Progress::~Progress()
 {
-    std::signal(SIGINT, SIG_DFL);
+    gCooperative = 0;
 }
 
 void Progress::start(const char*)
 {
     mLastPercent = -1;
+    gCooperative = 1;
 }
 
 void Progress::end()
 {
     if (mTerminal && mLastPercent >= 0) std::fprintf(stderr, "\r\033[K");
     mLastPercent = -1;
+    gCooperative = 0;
+    // A signal that came after the operation's last poll: nothing is being written yet.
+    if (gInterrupted.load()) exitOnSignal(gSignal);
 }
 
 bool Progress::wasInterrupted(int percent)
@@ -109,11 +139,13 @@ openvdb::FloatGrid::Ptr readLevelSet(const std::string& path, const std::string&
 {
     const openvdb::GridBase::Ptr g = io::selectGrid(io::readVdb(path), path, grid);
     diff::checkLevelSet(*g, path + ": grid '" + g->getName() + "'");
+    io::checkGridValues(*g, path);
     return openvdb::gridPtrCast<openvdb::FloatGrid>(g);
 }
 
 void stampGrid(openvdb::GridBase& grid, const std::string& source)
 {
+    grid.setCreator(std::string("ivdb ") + kVersion); // Houdini shows it as vdb_creator
     grid.insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
     grid.insertMeta("ivdb_source", openvdb::StringMetadata(source));
 }
@@ -130,7 +162,7 @@ openvdb::GridCPtrVec withFog(const openvdb::FloatGrid::Ptr& surface, bool fog)
     openvdb::GridCPtrVec grids{surface};
     if (fog) {
         openvdb::FloatGrid::Ptr density = levelset::fogFromLevelSet(*surface);
-        for (const char* key : {"ivdb_version", "ivdb_source"}) {
+        for (const char* key : {"creator", "ivdb_version", "ivdb_source"}) {
             if (auto meta = (*surface)[key]) density->insertMeta(key, *meta);
         }
         grids.push_back(density);
@@ -198,6 +230,7 @@ openvdb::GridBase::Ptr readColorGrid(const std::string& spec, bool withRange, bo
         throw std::runtime_error(path + ": grid '" + g->getName() + "' is a " + g->valueType() +
                                  " grid; --color-by needs a float (scalar) or vec3s (vector) grid");
     }
+    io::checkGridValues(*g, path);
     return g;
 }
 
@@ -209,6 +242,7 @@ void printNotes(const std::vector<std::string>& notes)
 int run(int argc, char** argv)
 {
     try {
+        installSignalHandlers();
         openvdb::initialize();
         CLI::App app{"ivdb: implicit surfaces to sparse OpenVDB level sets", "ivdb"};
         app.require_subcommand(1);
@@ -258,6 +292,10 @@ int run(int argc, char** argv)
         if (threads) limit.emplace(tbb::global_control::max_allowed_parallelism, size_t(*threads));
         return action ? action() : 2;
     } catch (const std::exception& e) {
+        if (gInterrupted.load()) {
+            std::cerr << "ivdb: error: interrupted; nothing was written" << std::endl;
+            return 128 + gSignal;
+        }
         std::cerr << "ivdb: error: " << util::errorText(e) << std::endl;
         return 1;
     } catch (...) {

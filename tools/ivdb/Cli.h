@@ -46,7 +46,8 @@ raster::RasterSettings sceneSettings(const scene::Scene& scene, const std::strin
                                      std::optional<double> voxelSize,
                                      std::optional<double> halfWidth);
 
-/// @brief Progress on stderr when it is a terminal, and cancellation on Ctrl-C (SIGINT).
+/// @brief Progress on stderr when it is a terminal, and cancellation: between start() and end()
+/// a SIGINT, SIGTERM or SIGHUP makes wasInterrupted() true (see run()).
 class Progress final: public openvdb::util::NullInterrupter
 {
 public:

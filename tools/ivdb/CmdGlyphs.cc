@@ -62,11 +62,13 @@ int runGlyphs(const GlyphsOptions& opt)
         throw std::runtime_error(opt.input + ": grid '" + chosen->getName() + "' is a " +
                                  chosen->valueType() + " grid; glyphs need a vec3s grid");
     }
+    io::checkGridValues(*field, opt.input);
     // Near the surface: the file's level set (ivdb gradient --with-input), if it has one.
     openvdb::FloatGrid::Ptr surface;
     for (const auto& g : grids) {
         if (g->getGridClass() == openvdb::GRID_LEVEL_SET && g->isType<openvdb::FloatGrid>()) {
             surface = openvdb::GridBase::grid<openvdb::FloatGrid>(g);
+            io::checkGridValues(*surface, opt.input);
             break;
         }
     }

@@ -22,6 +22,8 @@ struct InfoOptions
 int runInfo(const InfoOptions& opt)
 {
     const openvdb::GridPtrVec grids = io::readVdb(opt.file);
+    // A damaged grid fails info too, so pipelines can use info to vet files.
+    for (const auto& g : grids) io::checkGridValues(*g, opt.file);
     if (opt.json) {
         nlohmann::json out;
         out["file"] = opt.file;
@@ -36,7 +38,8 @@ int runInfo(const InfoOptions& opt)
             j["active_voxels"] = i.activeVoxels;
             j["leaf_nodes"] = i.leafNodes;
             j["memory_bytes"] = i.memoryBytes;
-            if (i.valueType == "float" || i.valueType == "double") j["background"] = i.background;
+            if (i.background.size() == 1) j["background"] = i.background[0];
+            if (i.background.size() == 3) j["background"] = i.background;
             if (i.indexBox.empty()) {
                 j["index_bbox"] = nullptr;
                 j["world_bbox"] = nullptr;
@@ -61,9 +64,14 @@ int runInfo(const InfoOptions& opt)
         if (i.voxelSize[0] != i.voxelSize[1] || i.voxelSize[0] != i.voxelSize[2]) {
             std::printf(" x %g x %g", i.voxelSize[1], i.voxelSize[2]);
         }
-        std::printf(", %llu active voxels, %llu leaves, memory %s\n",
+        std::printf(", %llu active voxels, %llu leaves, memory %s",
                     (unsigned long long)i.activeVoxels, (unsigned long long)i.leafNodes,
                     util::formatBytes(double(i.memoryBytes)).c_str());
+        if (i.background.size() == 1) std::printf(", background %g", i.background[0]);
+        if (i.background.size() == 3) {
+            std::printf(", background (%g, %g, %g)", i.background[0], i.background[1], i.background[2]);
+        }
+        std::printf("\n");
         if (!i.indexBox.empty()) {
             const auto& a = i.indexBox.min();
             const auto& b = i.indexBox.max();

@@ -7,6 +7,8 @@
 #include <ivdb/scene/Scene.h>
 #include <ivdb/util/System.h>
 
+#include <nlohmann/json.hpp>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -59,7 +61,12 @@ int runRasterize(const RasterizeOptions& opt)
         throw std::runtime_error(os.str());
     }
     stampGrid(*grid, opt.scene);
-    grid->insertMeta("ivdb_scene", openvdb::StringMetadata(sc.json));
+    // The scene as rasterized: the command line's overrides replace the file's values.
+    nlohmann::json scene = nlohmann::json::parse(sc.json);
+    scene["voxel_size"] = settings.voxelSize;
+    scene["half_width"] = settings.halfWidth;
+    scene["distance"] = settings.distance == raster::Distance::Bound ? "bound" : "exact";
+    grid->insertMeta("ivdb_scene", openvdb::StringMetadata(scene.dump()));
     grid->insertMeta("ivdb_sampling", openvdb::StringMetadata(opt.sampling));
     writeOutput(opt.output, withFog(grid, opt.fog));
     const auto t2 = std::chrono::steady_clock::now();

@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -22,6 +23,26 @@ namespace ivdb::io {
 namespace fs = std::filesystem;
 
 namespace {
+
+// The temporary file being written, for removePendingTemporaryFile() (a signal handler).
+char gPendingPath[4096];
+volatile std::sig_atomic_t gPendingSet = 0;
+
+void setPending(const std::string& tmp)
+{
+    gPendingSet = 0;
+    std::atomic_signal_fence(std::memory_order_seq_cst);
+    if (tmp.size() >= sizeof(gPendingPath)) return;
+    std::memcpy(gPendingPath, tmp.c_str(), tmp.size() + 1);
+    std::atomic_signal_fence(std::memory_order_seq_cst);
+    gPendingSet = 1;
+}
+
+void clearPending()
+{
+    gPendingSet = 0;
+    std::atomic_signal_fence(std::memory_order_seq_cst);
+}
 
 [[noreturn]] void ioError(const std::string& path, const std::string& what)
 {
@@ -201,6 +222,11 @@ void checkOutputPath(const std::string& path)
     }
 }
 
+void removePendingTemporaryFile() noexcept
+{
+    if (gPendingSet) ::unlink(gPendingPath);
+}
+
 void writeFileAtomically(const std::string& path,
                          const std::function<void(std::ostream&)>& write)
 {
@@ -210,6 +236,9 @@ void writeFileAtomically(const std::string& path,
     const std::string tmp = (fs::path(folderOf(path)) /
         ("." + target.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
          std::to_string(counter++))).string();
+    // Cleared on every way out: the temporary file is renamed or removed by then.
+    struct PendingGuard { ~PendingGuard() { clearPending(); } } pendingGuard;
+    setPending(tmp);
     try {
         {
             std::ofstream os;
@@ -310,12 +339,17 @@ GridInfo describeGrid(const openvdb::GridBase& grid)
     if (!info.indexBox.empty()) {
         info.worldBox = grid.transform().indexToWorld(info.indexBox);
     }
+    info.leafNodes = grid.baseTree().leafCount();
     if (const auto* f = dynamic_cast<const openvdb::FloatGrid*>(&grid)) {
-        info.background = f->background();
-        info.leafNodes = f->tree().leafCount();
+        info.background = {double(f->background())};
     } else if (const auto* d = dynamic_cast<const openvdb::DoubleGrid*>(&grid)) {
-        info.background = d->background();
-        info.leafNodes = d->tree().leafCount();
+        info.background = {d->background()};
+    } else if (const auto* v = dynamic_cast<const openvdb::Vec3SGrid*>(&grid)) {
+        const openvdb::Vec3s b = v->background();
+        info.background = {double(b[0]), double(b[1]), double(b[2])};
+    } else if (const auto* w = dynamic_cast<const openvdb::Vec3DGrid*>(&grid)) {
+        const openvdb::Vec3d b = w->background();
+        info.background = {b[0], b[1], b[2]};
     }
     return info;
 }

@@ -553,6 +553,18 @@ openvdb::FloatGrid::Ptr blendOnTarget(CsgOp op, const std::vector<openvdb::Float
     return result;
 }
 
+// blendOnTarget between the interrupter's start() and end().
+openvdb::FloatGrid::Ptr blendWithInterrupter(CsgOp op,
+                                             const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                                             const BlendSettings& settings,
+                                             std::vector<std::string>* notes)
+{
+    if (settings.interrupter) settings.interrupter->start("Blending");
+    openvdb::FloatGrid::Ptr out = blendOnTarget(op, grids, settings, notes);
+    if (settings.interrupter) settings.interrupter->end();
+    return out;
+}
+
 } // namespace
 
 double blendReach(double p, double toleranceWorld)
@@ -567,7 +579,7 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
     const openvdb::math::Transform& target = finestInput(inputs).transform();
     std::vector<openvdb::FloatGrid::Ptr> grids;
     for (const auto& in : inputs) grids.push_back(matchTransform(*in, target, notes));
-    return blendOnTarget(op, grids, settings, notes);
+    return blendWithInterrupter(op, grids, settings, notes);
 }
 
 openvdb::FloatGrid::Ptr blendInPlace(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& inputs,
@@ -579,7 +591,7 @@ openvdb::FloatGrid::Ptr blendInPlace(CsgOp op, const std::vector<openvdb::FloatG
     for (const auto& in : inputs) {
         grids.push_back(in->transform() == target ? in : matchTransform(*in, target, notes));
     }
-    return blendOnTarget(op, grids, settings, notes);
+    return blendWithInterrupter(op, grids, settings, notes);
 }
 
 } // namespace ivdb::ops

@@ -67,6 +67,7 @@ struct Context
     double reach = 0.0;     // world distance a box is dilated by before the interval test
     CoordBBox region;       // index box that holds every voxel of the result
     openvdb::util::NullInterrupter* interrupter = nullptr;
+    std::uint64_t memoryLimit = 0;
 
     BBoxd worldBox(const CoordBBox& b) const
     {
@@ -188,6 +189,71 @@ struct Level1Result
 /// Blocks between OpenVDB's 128^3 internal nodes and its 8^3 leaves in the descent.
 constexpr int kBlock = 32;
 
+/// The sparse path's memory, estimated before it allocates: the straddling level-2 nodes are
+/// known; up to 8 of them (evenly spread) count their straddling 128^3 children, and up to 16 of
+/// those count their straddling leaves (interval tests only, no voxels). Refuses, with the
+/// estimate, when the grid would not fit (a voxel size far too small for the shape, typically).
+template<typename TaskT>
+void checkSparseMemory(const Context& ctx, const std::vector<TaskT>& level2)
+{
+    if (level2.empty()) return;
+    auto alignDown = [](int v, int dim) { return v & ~(dim - 1); };
+    const int d2 = Int2T::DIM, d1 = Int1T::DIM, d0 = LeafT::DIM;
+    const size_t sample2 = std::min<size_t>(level2.size(), 8);
+    double children = 0.0; // straddling level-1 nodes in the sampled level-2 nodes
+    std::vector<std::pair<Coord, const Implicit*>> straddling1;
+    for (size_t s = 0; s < sample2; ++s) {
+        const TaskT& t2 = level2[s * level2.size() / sample2];
+        CoordBBox sub = CoordBBox::createCube(t2.origin, d2);
+        sub.intersect(ctx.region);
+        for (int a = alignDown(sub.min().x(), d1); a <= sub.max().x(); a += d1)
+            for (int b = alignDown(sub.min().y(), d1); b <= sub.max().y(); b += d1)
+                for (int c = alignDown(sub.min().z(), d1); c <= sub.max().z(); c += d1) {
+                    const Coord o(a, b, c);
+                    if (ctx.classify(*t2.node, CoordBBox::createCube(o, d1)) == Verdict::Straddle) {
+                        children += 1.0;
+                        straddling1.emplace_back(o, t2.node.get());
+                    }
+                }
+        if (ctx.interrupted()) throwInterrupted();
+    }
+    const double level1 = children * double(level2.size()) / double(sample2);
+    const size_t sample1 = std::min<size_t>(straddling1.size(), 16);
+    double leaves = 0.0;
+    for (size_t s = 0; s < sample1; ++s) {
+        const auto& [o1, node] = straddling1[s * straddling1.size() / sample1];
+        CoordBBox sub = CoordBBox::createCube(o1, d1);
+        sub.intersect(ctx.region);
+        for (int a = alignDown(sub.min().x(), d0); a <= sub.max().x(); a += d0)
+            for (int b = alignDown(sub.min().y(), d0); b <= sub.max().y(); b += d0)
+                for (int c = alignDown(sub.min().z(), d0); c <= sub.max().z(); c += d0) {
+                    const Coord o(a, b, c);
+                    if (ctx.classify(*node, CoordBBox::createCube(o, d0)) == Verdict::Straddle) {
+                        leaves += 1.0;
+                    }
+                }
+    }
+    const double leafCount = sample1 ? level1 * leaves / double(sample1) : 0.0;
+    // A leaf's values and masks; re-distancing (fast sweeping) holds about two more copies.
+    const double perLeaf = double(sizeof(LeafT) + LeafT::SIZE * sizeof(float)) * (ctx.exact ? 1.0 : 3.0);
+    const double need = leafCount * perLeaf + level1 * double(sizeof(Int1T));
+    const double available = double(util::availableMemory()); // 0 when unknown
+    const double limit = ctx.memoryLimit ? double(ctx.memoryLimit)
+                       : available > 0.0 ? 0.8 * available
+                                         : 1e18;
+    // The level-1 task list itself: 24 bytes per 128^3 node of every straddling 4096^3 node.
+    const double tasks = double(level2.size()) * double((d2 / d1) * (d2 / d1) * (d2 / d1));
+    if (need > limit || tasks > 2e8) {
+        std::ostringstream os;
+        os << "the narrow band at voxel size " << util::formatNumber(ctx.dx) << " would need about "
+           << util::formatBytes(need) << " (about " << std::uint64_t(leafCount)
+           << " leaves of 8^3 voxels) but only " << util::formatBytes(limit)
+           << " may be used: use a larger voxel size (the memory grows as 1/voxel_size^2), a "
+              "smaller half width or smaller bounds";
+        OPENVDB_THROW(openvdb::RuntimeError, os.str());
+    }
+}
+
 /// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels), with 32^3
 /// blocks between the last two.
 openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
@@ -202,7 +268,7 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
 
     // Level 2 (4096^3): few nodes, serial.
     struct Task { Coord origin; Implicit::Ptr node; };
-    std::vector<Task> tasks;
+    std::vector<Task> straddling2;
     std::vector<Coord> insideLevel2;
     const CoordBBox& reg = ctx.region;
     const int d2 = Int2T::DIM, d1 = Int1T::DIM;
@@ -216,16 +282,21 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
                     insideLevel2.push_back(box2.min());
                     continue;
                 }
-                const Implicit::Ptr node2 = shape.prune(ctx.dilatedWorldBox(box2));
-                // Level-1 children of this node that overlap the region.
-                CoordBBox sub = box2;
-                sub.intersect(reg);
-                for (int a = alignDown(sub.min().x(), d1); a <= sub.max().x(); a += d1)
-                    for (int b = alignDown(sub.min().y(), d1); b <= sub.max().y(); b += d1)
-                        for (int c = alignDown(sub.min().z(), d1); c <= sub.max().z(); c += d1)
-                            tasks.push_back({Coord(a, b, c), node2});
+                straddling2.push_back({box2.min(), shape.prune(ctx.dilatedWorldBox(box2))});
             }
         }
+        if (ctx.interrupted(0)) throwInterrupted();
+    }
+    checkSparseMemory(ctx, straddling2);
+    // Level-1 children of each straddling level-2 node that overlap the region.
+    std::vector<Task> tasks;
+    for (const Task& t2 : straddling2) {
+        CoordBBox sub = CoordBBox::createCube(t2.origin, d2);
+        sub.intersect(reg);
+        for (int a = alignDown(sub.min().x(), d1); a <= sub.max().x(); a += d1)
+            for (int b = alignDown(sub.min().y(), d1); b <= sub.max().y(); b += d1)
+                for (int c = alignDown(sub.min().z(), d1); c <= sub.max().z(); c += d1)
+                    tasks.push_back({Coord(a, b, c), t2.node});
     }
     if (ctx.interrupted(0)) throwInterrupted();
 
@@ -334,8 +405,10 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
     const Coord dim = reg.dim();
     const std::uint64_t nx = dim.x(), ny = dim.y(), nz = dim.z();
     const std::uint64_t count = nx * ny * nz;
-    std::vector<float> samples;
-    samples.resize(count); // the caller checked the estimate against memory
+    // The caller checked the estimate against memory. Not zero-filled: the parallel loop below
+    // writes every sample, so the pages are first touched there, in parallel and interruptibly
+    // (a serial fill of 2 GB took seconds and ignored Ctrl-C).
+    std::unique_ptr<float[]> samples(new float[count]);
 
     const Implicit& shape = *ctx.shape;
     std::atomic<bool> cancelled{false};
@@ -347,7 +420,7 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
             z[implicit::kMaxBatch], v[implicit::kMaxBatch];
         for (std::uint64_t row = r.begin(); row != r.end(); ++row) {
             const int i = reg.min().x() + int(row / ny), j = reg.min().y() + int(row % ny);
-            float* out = samples.data() + row * nz;
+            float* out = samples.get() + row * nz;
             for (std::uint64_t k0 = 0; k0 < nz; k0 += implicit::kMaxBatch) {
                 const std::size_t n = std::size_t(std::min<std::uint64_t>(implicit::kMaxBatch, nz - k0));
                 for (std::size_t m = 0; m < n; ++m) {
@@ -455,8 +528,7 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
             leaves[b] = leaf;
         }
     });
-    samples.clear();
-    samples.shrink_to_fit();
+    samples.reset();
 
     auto grid = openvdb::FloatGrid::create(bg);
     grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
@@ -501,6 +573,12 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         os << "voxel size must be > 0 and finite, got " << s.voxelSize;
         OPENVDB_THROW(openvdb::ValueError, os.str());
     }
+    // OpenVDB's linear transforms refuse a scale whose determinant is below 3e-15.
+    if (s.voxelSize * s.voxelSize * s.voxelSize < 3.0 * openvdb::math::Tolerance<double>::value()) {
+        OPENVDB_THROW(openvdb::ValueError, "voxel size " + util::formatNumber(s.voxelSize) +
+            " is below 1.45e-05, the smallest OpenVDB's transforms accept: scale the scene up "
+            "(a \"transform\" with \"scale\") and use a larger voxel size");
+    }
     if (!(s.halfWidth >= 1.0 && s.halfWidth <= kMaxHalfWidth)) {
         std::ostringstream os;
         os << "half width must be in [1, " << kMaxHalfWidth << "] voxels, got " << s.halfWidth;
@@ -529,6 +607,7 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         ctx.exact = true; // the stored value is f itself
     }
     ctx.interrupter = s.interrupter;
+    ctx.memoryLimit = s.memoryLimit;
     if (ctx.exact) {
         ctx.reach = ctx.band;
     } else {
@@ -556,6 +635,18 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         hi[i] = int(h);
     }
     ctx.region = CoordBBox(lo, hi);
+    // The sparse descent visits every 4096^3 node of the region: bound that count (a surface
+    // across such a region could not fit in memory anyway).
+    double nodes = 1.0;
+    for (int i = 0; i < 3; ++i) nodes *= std::ceil(double(hi[i] - lo[i] + 1) / Int2T::DIM);
+    if (nodes > 1e7) {
+        std::ostringstream os;
+        os << "the shape spans " << (hi[0] - lo[0] + 1) << " x " << (hi[1] - lo[1] + 1) << " x "
+           << (hi[2] - lo[2] + 1) << " voxels at voxel size " << util::formatNumber(s.voxelSize)
+           << ", far more than a narrow band in memory can cover: use a larger voxel size or "
+              "smaller bounds";
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
     return ctx;
 }
 
@@ -578,7 +669,7 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
         // In double: the product of three dimensions of up to 2^31 voxels overflows 64 bits.
         const double need = double(d.x()) * double(d.y()) * double(d.z()) * sizeof(float);
         const double available = double(util::availableMemory()); // 0 when unknown
-        const double limit = settings.denseMemoryLimit ? double(settings.denseMemoryLimit)
+        const double limit = settings.memoryLimit ? double(settings.memoryLimit)
                            : available > 0.0           ? 0.8 * available
                                                        : 1e18;
         if (need > limit) {

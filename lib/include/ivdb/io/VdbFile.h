@@ -23,13 +23,18 @@ void checkOutputPath(const std::string& path);
 void writeFileAtomically(const std::string& path,
                          const std::function<void(std::ostream&)>& write);
 
+/// @brief Remove the temporary file that writeFileAtomically is writing now, if any.
+/// @details Async-signal-safe (one unlink): for a signal handler that is about to end the
+/// process, so that an interrupted write leaves nothing behind.
+void removePendingTemporaryFile() noexcept;
+
 /// @brief Write @a grids to @a path with OpenVDB's default compression, atomically
 /// (writeFileAtomically).
 /// @details The grids go to a temporary file in the same folder (`.NAME.tmp-PID-N`), which is
 /// flushed, synced and renamed over @a path: a failure (a full disk, say) or a kill leaves
 /// either the old file or the complete new one, never a partial or clobbered @a path. After an
-/// error the temporary file is removed; a kill during the write can leave it behind (it is
-/// hidden, named after the output and the process id). Every stream error is checked, unlike
+/// error the temporary file is removed (the CLI's signal handler removes it too); only SIGKILL
+/// during the write can leave it behind (hidden, named after the output and the process id). Every stream error is checked, unlike
 /// io::File::write.
 /// @throw openvdb::IoError naming the path and the reason
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
@@ -47,6 +52,13 @@ openvdb::GridPtrVec readVdb(const std::string& path);
 openvdb::GridBase::Ptr selectGrid(const openvdb::GridPtrVec& grids, const std::string& path,
                                   const std::string& name);
 
+/// @brief Check a grid read from @a path before it is used: a finite, non-degenerate transform,
+/// every value (background, tiles and voxels) finite for float, double and vector grids, and a
+/// positive background for a level set. Threaded (OpenVDB's tools::Diagnose); with delayed
+/// loading this is where the voxel buffers are first read, so damaged buffers show up here.
+/// @throw openvdb::ValueError naming the file, the grid and what is wrong
+void checkGridValues(const openvdb::GridBase& grid, const std::string& path);
+
 /// @brief What `ivdb info` reports about a grid.
 struct GridInfo
 {
@@ -57,7 +69,7 @@ struct GridInfo
     openvdb::BBoxd worldBox;       // of the active voxels' centers
     std::uint64_t memoryBytes = 0; // in-core size of the tree
     bool isLevelSet = false;
-    double background = 0.0;       // for scalar grids
+    std::vector<double> background; // 1 value (float, double) or 3 (vec3s, vec3d); else empty
 };
 
 /// @brief Describe a grid (fully loaded).

@@ -49,8 +49,9 @@ struct RasterSettings
     openvdb::util::NullInterrupter* interrupter = nullptr;
     /// Exact distances everywhere, or CSG of distances as it is (see Distance).
     Distance distance = Distance::Exact;
-    /// Memory the dense path may use, in bytes; 0 means the machine's available memory.
-    std::uint64_t denseMemoryLimit = 0;
+    /// Memory the rasterizer may use, in bytes (dense: its sample array; sparse: its estimated
+    /// leaves); 0 means 80% of the machine's available memory.
+    std::uint64_t memoryLimit = 0;
 };
 
 /// @brief Rasterize @a shape into a narrow-band level set.

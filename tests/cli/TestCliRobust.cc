@@ -1,0 +1,413 @@
+// Robustness of every command against what an unattended pipeline meets: damaged .vdb files
+// (truncated, bytes flipped, empty, a folder, not a .vdb), values that are not finite, a full
+// disk, signals in the middle of a run, and extreme but valid settings. The rule each time: exit
+// 1 with `ivdb: error: <file>: ...` (or 128 + the signal), never a crash or a hang, and no output
+// or temporary file left behind.
+#include "CliRun.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include <nlohmann/json.hpp>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <sys/mount.h>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+using ivdb::test::CliResult;
+using ivdb::test::kSlowdown;
+using ivdb::test::runIvdb;
+using ivdb::test::slurpFile;
+
+/// One damaged input: a label for messages and its bytes (or a folder when isFolder).
+struct BadInput
+{
+    std::string label;
+    std::string bytes;
+    bool isFolder = false;
+};
+
+/// The ways a file gets damaged: truncated at @a cuts offsets spread over the file (plus the
+/// header's first bytes), @a flips bytes inverted at spread offsets, and the four odd cases.
+std::vector<BadInput> damagedVersions(const std::string& good, int cuts, int flips)
+{
+    std::vector<BadInput> out;
+    std::set<size_t> cutAt{1, 4, 8, 12, 16, 17, 24, 60};
+    for (int i = 1; i < cuts; ++i) cutAt.insert(good.size() * i / cuts);
+    cutAt.insert(good.size() - 1);
+    for (size_t n : cutAt) out.push_back({"truncated at " + std::to_string(n), good.substr(0, n)});
+    std::set<size_t> flipAt{0, 8, 12, 20, 40, 70};
+    for (int i = 1; i < flips; ++i) flipAt.insert(good.size() * i / flips);
+    for (size_t n : flipAt) {
+        std::string b = good;
+        b[n] = char(~b[n]);
+        out.push_back({"byte " + std::to_string(n) + " flipped", b});
+    }
+    out.push_back({"empty", ""});
+    out.push_back({"a folder", "", true});
+    out.push_back({"text", "this is not a vdb file\n"});
+    std::mt19937 rng(7);
+    std::string noise(4096, '\0');
+    for (char& c : noise) c = char(rng() & 0xff);
+    out.push_back({"random bytes", noise});
+    out.push_back({"magic then random bytes", good.substr(0, 8) + noise});
+    return out;
+}
+
+class TestCliRobust: public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        mDir = fs::temp_directory_path() /
+               ("ivdb-test-cli-robust-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        fs::remove_all(mDir);
+        fs::create_directories(mDir);
+        write("s.json", R"({"voxel_size": 0.1, "shape": {"type": "sphere", "radius": 1}})");
+    }
+    void TearDown() override
+    {
+        std::error_code ec;
+        ::umount2((mDir / "full").c_str(), MNT_DETACH);
+        fs::remove_all(mDir, ec);
+    }
+
+    void write(const std::string& name, const std::string& bytes) const
+    {
+        std::ofstream(mDir / name, std::ios::binary | std::ios::trunc) << bytes;
+    }
+
+    CliResult run(const std::vector<std::string>& args, const std::string& prefix = "") const
+    {
+        return runIvdb(mDir, args, 60, prefix);
+    }
+
+    /// Every file in mDir (hidden ones too) that is not in @a inputs.
+    std::vector<std::string> leftovers(const std::set<std::string>& inputs) const
+    {
+        std::vector<std::string> out;
+        for (const auto& e : fs::directory_iterator(mDir)) {
+            const std::string name = e.path().filename().string();
+            if (!inputs.count(name)) out.push_back(name);
+        }
+        return out;
+    }
+
+    std::set<std::string> names() const
+    {
+        std::set<std::string> out;
+        for (const auto& e : fs::directory_iterator(mDir)) out.insert(e.path().filename().string());
+        return out;
+    }
+
+    /// Run @a args (with "BAD" standing for the damaged file) on every damaged version of
+    /// @a good; returns how many runs refused the file (the rest accepted a file whose damage
+    /// left it valid, which only a flipped byte may do).
+    int sweep(const std::string& good, const std::vector<std::string>& args, int cuts, int flips)
+    {
+        const std::set<std::string> before = names();
+        int refused = 0, runs = 0;
+        for (const BadInput& bad : damagedVersions(good, cuts, flips)) {
+            const std::string name = "bad.vdb";
+            if (bad.isFolder) fs::create_directory(mDir / name);
+            else write(name, bad.bytes);
+            std::vector<std::string> a = args;
+            for (auto& s : a) if (s == "BAD") s = name;
+            const CliResult r = run(a);
+            ++runs;
+            const std::string what = "ivdb " + args.front() + " on a file " + bad.label;
+            EXPECT_LT(r.exitCode, 128) << what << ": killed by a signal or timed out\n" << r.err;
+            std::set<std::string> expected = before;
+            expected.insert(name);
+            if (r.exitCode != 0) {
+                ++refused;
+                EXPECT_EQ(r.exitCode, 1) << what << "\n" << r.err;
+                EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << what << ": " << r.err;
+                EXPECT_NE(r.err.find(name), std::string::npos) << what << ": the message does "
+                                                                  "not name the file: " << r.err;
+                EXPECT_EQ(leftovers(expected), std::vector<std::string>{}) << what;
+            } else {
+                EXPECT_NE(bad.label.find("flipped"), std::string::npos)
+                    << what << ": accepted\n" << r.out;
+            }
+            for (const auto& f : leftovers(expected)) fs::remove_all(mDir / f);
+            fs::remove_all(mDir / name);
+        }
+        std::cout << "[ robust ] ivdb " << args.front() << ": " << runs << " damaged inputs, "
+                  << refused << " refused with an error, " << runs - refused
+                  << " accepted (a flipped byte left a valid file), 0 crashes" << std::endl;
+        RecordProperty("damaged_inputs", runs);
+        RecordProperty("refused", refused);
+        return refused;
+    }
+
+    std::string makeSphere(const std::string& name = "good.vdb") const
+    {
+        const CliResult r = run({"rasterize", "s.json", "-o", name, "-q"});
+        EXPECT_EQ(r.exitCode, 0) << r.err;
+        return slurpFile(mDir / name);
+    }
+
+    fs::path mDir;
+};
+
+TEST_F(TestCliRobust, DamagedFilesInInfoAndTheDifferentialCommands)
+{
+    const std::string good = makeSphere();
+    ASSERT_GT(good.size(), 1000u);
+    EXPECT_GT(sweep(good, {"info", "BAD"}, 16, 12), 20);
+    EXPECT_GT(sweep(good, {"gradient", "BAD", "-o", "out.vdb", "-q"}, 16, 12), 20);
+    EXPECT_GT(sweep(good, {"curvature", "BAD", "-o", "out.vdb", "-q"}, 12, 8), 20);
+}
+
+TEST_F(TestCliRobust, DamagedFilesInCsgAndBlend)
+{
+    const std::string good = makeSphere();
+    EXPECT_GT(sweep(good, {"csg", "union", "BAD", "good.vdb", "-o", "out.vdb", "-q"}, 16, 12), 20);
+    EXPECT_GT(sweep(good, {"blend", "union", "good.vdb", "BAD", "-p", "10", "-o", "out.vdb", "-q"},
+                    12, 8), 20);
+}
+
+TEST_F(TestCliRobust, DamagedFilesInMeshRenderAndGlyphs)
+{
+    const std::string good = makeSphere();
+    EXPECT_GT(sweep(good, {"mesh", "BAD", "-o", "out.obj", "-q"}, 12, 8), 20);
+    EXPECT_GT(sweep(good, {"render", "BAD", "-o", "out.png", "--size", "32x24", "-q"}, 12, 8), 20);
+    EXPECT_GT(sweep(good, {"mesh", "good.vdb", "-o", "out.ply", "--color-by", "BAD", "-q"}, 12, 8),
+              20);
+    ASSERT_EQ(run({"gradient", "good.vdb", "-o", "grad.vdb", "-q"}).exitCode, 0);
+    EXPECT_GT(sweep(slurpFile(mDir / "grad.vdb"), {"glyphs", "BAD", "-o", "out.obj", "-q"}, 12, 8),
+              20);
+}
+
+// NaN, infinity and a broken transform written by another tool: refused before use.
+TEST_F(TestCliRobust, ValuesThatAreNotFiniteAreRefused)
+{
+    makeSphere();
+    auto load = [&]() {
+        openvdb::io::File f((mDir / "good.vdb").string());
+        f.open();
+        auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(f.readGrid("surface"));
+        f.close();
+        return g;
+    };
+    auto save = [&](const std::string& name, openvdb::FloatGrid::Ptr g) {
+        openvdb::io::File((mDir / name).string()).write({g});
+    };
+    {
+        auto g = load();
+        g->tree().setValueOn(openvdb::Coord(10, 0, 0), std::nanf(""));
+        save("nan.vdb", g);
+    }
+    {
+        auto g = load();
+        g->tree().setValueOff(openvdb::Coord(500, 0, 0), INFINITY);
+        save("inf.vdb", g);
+    }
+    {
+        auto g = load();
+        g->setTransform(openvdb::math::Transform::createLinearTransform(std::nan("")));
+        save("nan_voxel.vdb", g);
+    }
+    {
+        auto g = load();
+        g->tree().root().setBackground(-0.3f, /*updateChildNodes=*/false);
+        save("negative_background.vdb", g);
+    }
+    const std::set<std::string> before = names();
+    for (const std::string bad : {"nan.vdb", "inf.vdb", "nan_voxel.vdb", "negative_background.vdb"}) {
+        const std::vector<std::vector<std::string>> commands{
+            {"info", bad},
+            {"gradient", bad, "-o", "out.vdb"},
+            {"curvature", bad, "-o", "out.vdb"},
+            {"csg", "union", "good.vdb", bad, "-o", "out.vdb"},
+            {"blend", "union", bad, "good.vdb", "-p", "10", "-o", "out.vdb"},
+            {"mesh", bad, "-o", "out.obj"},
+            {"render", bad, "-o", "out.png", "--size", "32x24"},
+            {"render", "good.vdb", "-o", "out.png", "--size", "32x24", "--color-by", bad},
+        };
+        for (const auto& args : commands) {
+            const CliResult r = run(args);
+            const std::string what = "ivdb " + args.front() + " on " + bad;
+            EXPECT_EQ(r.exitCode, 1) << what << "\n" << r.err;
+            EXPECT_NE(r.err.find("ivdb: error: " + bad + ": grid 'surface'"), std::string::npos)
+                << what << ": " << r.err;
+            EXPECT_EQ(leftovers(before), std::vector<std::string>{}) << what;
+        }
+    }
+    EXPECT_NE(run({"info", "nan.vdb"}).err.find("not finite"), std::string::npos);
+    EXPECT_NE(run({"info", "nan_voxel.vdb"}).err.find("invalid transform"), std::string::npos);
+    EXPECT_NE(run({"info", "negative_background.vdb"}).err.find("background"), std::string::npos);
+}
+
+// A full disk: a file-size limit (any machine) and, where the test may mount one, a 256 kB tmpfs.
+TEST_F(TestCliRobust, FullDiskGivesAClearErrorAndKeepsTheOldOutput)
+{
+    write("fine.json", R"({"voxel_size": 0.02, "shape": {"type": "sphere", "radius": 1}})");
+    write("out.vdb", "old output");
+    const std::set<std::string> before = names();
+    for (const auto& args : std::vector<std::vector<std::string>>{
+             {"rasterize", "fine.json", "-o", "out.vdb"},
+             {"rasterize", "fine.json", "-o", "out.obj"},
+         }) {
+        // ulimit -f counts 1 kB blocks: 16 kB is far less than either output.
+        const CliResult r = run(args, "ulimit -f 16 && ");
+        EXPECT_EQ(r.exitCode, 1) << r.err;
+        EXPECT_NE(r.err.find("ivdb: error: " + args[3]), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("is the disk full?"), std::string::npos) << r.err;
+        EXPECT_EQ(leftovers(before), std::vector<std::string>{});
+        EXPECT_EQ(slurpFile(mDir / "out.vdb"), "old output");
+    }
+    {
+        makeSphere("big.vdb");
+        const std::set<std::string> withBig = names();
+        for (const auto& args : std::vector<std::vector<std::string>>{
+                 {"mesh", "big.vdb", "-o", "out.obj"},
+                 {"gradient", "big.vdb", "-o", "out.vdb"},
+                 {"render", "big.vdb", "-o", "out.png"},
+             }) {
+            const CliResult r = run(args, "ulimit -f 1 && ");
+            EXPECT_EQ(r.exitCode, 1) << args.front() << ": " << r.err;
+            EXPECT_NE(r.err.find("is the disk full?"), std::string::npos) << r.err;
+            EXPECT_EQ(leftovers(withBig), std::vector<std::string>{}) << args.front();
+        }
+    }
+    // A device as the output is refused up front, /dev/full included.
+    const CliResult dev = run({"rasterize", "s.json", "-o", "/dev/full"});
+    EXPECT_EQ(dev.exitCode, 1);
+    EXPECT_NE(dev.err.find("not a regular file"), std::string::npos) << dev.err;
+
+    fs::create_directory(mDir / "full");
+    if (::geteuid() != 0 ||
+        ::mount("tmpfs", (mDir / "full").c_str(), "tmpfs", 0, "size=256k") != 0) {
+        std::cout << "[ robust ] no tmpfs mount here (not root); the file-size limit above stands "
+                     "in for a full disk" << std::endl;
+        return;
+    }
+    write("full/out.vdb", "old output");
+    const CliResult r = run({"rasterize", "fine.json", "-o", "full/out.vdb"});
+    EXPECT_EQ(r.exitCode, 1) << r.err;
+    EXPECT_NE(r.err.find("No space left on device"), std::string::npos) << r.err;
+    std::vector<std::string> inFull;
+    for (const auto& e : fs::directory_iterator(mDir / "full")) inFull.push_back(e.path().filename());
+    EXPECT_EQ(inFull, std::vector<std::string>{"out.vdb"});
+    EXPECT_EQ(slurpFile(mDir / "full/out.vdb"), "old output");
+}
+
+// Ctrl-C during a long computation stops it through the interrupter; a signal while the output
+// is being written removes the temporary file; SIGKILL there leaves the old output whole.
+TEST_F(TestCliRobust, SignalsStopRunsAndLeaveNoPartialOutput)
+{
+    using ivdb::test::spawnIvdb;
+    using ivdb::test::waitIvdb;
+    // Dense sampling of 800^3 voxels: seconds of work, polled by the interrupter.
+    write("dense.json", R"({"voxel_size": 0.0025, "shape": {"type": "sphere", "radius": 1}})");
+    std::set<std::string> before = names();
+    {
+        const pid_t pid = spawnIvdb(mDir, {"rasterize", "dense.json", "--sampling", "dense", "-o", "out.vdb"});
+        ::usleep(700000);
+        ASSERT_EQ(::kill(pid, SIGINT), 0);
+        const auto t0 = std::chrono::steady_clock::now();
+        const int code = waitIvdb(pid, 20.0 * kSlowdown);
+        const std::chrono::duration<double> took = std::chrono::steady_clock::now() - t0;
+        const std::string err = slurpFile(mDir / ".err.txt");
+        EXPECT_EQ(code, 130) << err;
+        EXPECT_NE(err.find("interrupted"), std::string::npos) << err;
+        std::cout << "[ robust ] SIGINT during dense sampling: exit " << code << " after "
+                  << took.count() << " s" << std::endl;
+        before.insert(".err.txt");
+        before.insert(".out.txt");
+        EXPECT_EQ(leftovers(before), std::vector<std::string>{});
+    }
+    // A large gradient output: signal as soon as its temporary file appears.
+    write("big.json", R"({"voxel_size": 0.004, "shape": {"type": "sphere", "radius": 1}})");
+    ASSERT_EQ(run({"rasterize", "big.json", "-o", "big.vdb", "-q"}).exitCode, 0);
+    before = names();
+    auto signalDuringWrite = [&](int sig) {
+        const pid_t pid = spawnIvdb(mDir, {"gradient", "big.vdb", "-o", "out.vdb"});
+        bool seen = false;
+        for (int i = 0; i < 60000 * kSlowdown && !seen; ++i) {
+            for (const auto& e : fs::directory_iterator(mDir)) {
+                if (e.path().filename().string().rfind(".out.vdb.tmp-", 0) == 0) seen = true;
+            }
+            if (!seen) ::usleep(500);
+        }
+        EXPECT_TRUE(seen) << "the write was not caught";
+        ::kill(pid, sig);
+        return waitIvdb(pid, 20.0 * kSlowdown);
+    };
+    EXPECT_EQ(signalDuringWrite(SIGTERM), 128 + SIGTERM) << slurpFile(mDir / ".err.txt");
+    EXPECT_EQ(leftovers(before), std::vector<std::string>{});
+    EXPECT_EQ(signalDuringWrite(SIGINT), 128 + SIGINT) << slurpFile(mDir / ".err.txt");
+    EXPECT_EQ(leftovers(before), std::vector<std::string>{});
+
+    write("out.vdb", "old output");
+    EXPECT_EQ(signalDuringWrite(SIGKILL), 128 + SIGKILL);
+    EXPECT_EQ(slurpFile(mDir / "out.vdb"), "old output");
+    // The next run replaces it with the complete file.
+    ASSERT_EQ(run({"gradient", "big.vdb", "-o", "out.vdb", "-q"}).exitCode, 0);
+    openvdb::io::File f((mDir / "out.vdb").string());
+    f.open();
+    EXPECT_TRUE(f.readGrid("gradient")->activeVoxelCount() > 100000);
+}
+
+// Extreme but valid settings work and give the closed-form band.
+TEST_F(TestCliRobust, ExtremeButValidSettingsWork)
+{
+    auto activeVoxels = [&](const std::string& file) -> double {
+        const CliResult r = run({"info", "--json", file});
+        EXPECT_EQ(r.exitCode, 0) << r.err;
+        return nlohmann::json::parse(r.out)["grids"][0]["active_voxels"].get<double>();
+    };
+    // |d| < w dx around a sphere: the shell's volume in voxels.
+    auto shell = [](double r, double dx, double w) {
+        const double a = r / dx + w, b = r / dx - w;
+        return 4.0 / 3.0 * M_PI * (a * a * a - b * b * b);
+    };
+    write("tiny.json", R"({"voxel_size": 1e-4, "shape": {"type": "sphere", "radius": 0.005}})");
+    ASSERT_EQ(run({"rasterize", "tiny.json", "-o", "tiny.vdb", "-q"}).exitCode, 0);
+    EXPECT_NEAR(activeVoxels("tiny.vdb") / shell(0.005, 1e-4, 3), 1.0, 0.02);
+    for (double w : {1.0, 20.0}) {
+        const std::string out = "w" + std::to_string(int(w)) + ".vdb";
+        const CliResult r = run({"rasterize", "s.json", "--voxel-size", "0.02", "--half-width",
+                                 std::to_string(w), "-o", out, "-q"});
+        ASSERT_EQ(r.exitCode, 0) << r.err;
+        EXPECT_NEAR(activeVoxels(out) / shell(1.0, 0.02, w), 1.0, 0.03) << "half width " << w;
+        EXPECT_EQ(run({"gradient", out, "-o", "g.vdb", "-q"}).exitCode, 0) << "half width " << w;
+        EXPECT_EQ(run({"curvature", out, "-o", "c.vdb", "-q"}).exitCode, 0) << "half width " << w;
+        EXPECT_EQ(run({"mesh", out, "-o", "m.obj", "-q"}).exitCode, 0) << "half width " << w;
+    }
+    // p = 1000 in a scene and on grids: the sharp union, within a voxel.
+    write("a.json", R"({"voxel_size": 0.05, "shape": {"type": "sphere", "center": [-0.5, 0, 0], "radius": 1}})");
+    write("b.json", R"({"voxel_size": 0.05, "shape": {"type": "sphere", "center": [0.5, 0, 0], "radius": 1}})");
+    write("p1000.json", R"({"voxel_size": 0.05, "shape": {"type": "blend", "op": "union", "p": 1000,
+        "children": [{"type": "sphere", "center": [-0.5, 0, 0], "radius": 1},
+                     {"type": "sphere", "center": [0.5, 0, 0], "radius": 1}]}})");
+    for (const char* s : {"a", "b", "p1000"}) {
+        ASSERT_EQ(run({"rasterize", std::string(s) + ".json", "-o", std::string(s) + ".vdb", "-q"}).exitCode, 0);
+    }
+    ASSERT_EQ(run({"csg", "union", "a.vdb", "b.vdb", "-o", "sharp.vdb", "-q"}).exitCode, 0);
+    const CliResult blend = run({"blend", "union", "a.vdb", "b.vdb", "-p", "1000", "-o", "grid1000.vdb", "-q"});
+    ASSERT_EQ(blend.exitCode, 0) << blend.err;
+    const double sharp = activeVoxels("sharp.vdb");
+    EXPECT_NEAR(activeVoxels("p1000.vdb") / sharp, 1.0, 0.01);
+    EXPECT_NEAR(activeVoxels("grid1000.vdb") / sharp, 1.0, 0.01);
+}
+
+} // namespace
