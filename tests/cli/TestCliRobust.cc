@@ -367,6 +367,35 @@ TEST_F(TestCliRobust, SignalsStopRunsAndLeaveNoPartialOutput)
     EXPECT_TRUE(f.readGrid("gradient")->activeVoxelCount() > 100000);
 }
 
+// Degenerate quadrics and shapes with no surface in the bounds: a clear error, no empty grid.
+TEST_F(TestCliRobust, DegenerateShapesAreRefused)
+{
+    const std::string bounds = R"("bounds": {"min": [-1, -1, -1], "max": [1, 1, 1]}, )";
+    const std::vector<std::pair<std::string, std::string>> cases{
+        {R"({"type": "quadric", "matrix": [[0,0,0,0],[0,0,0,0],[0,0,0,0],[0,0,0,0]]})", "all zero"},
+        {R"({"type": "quadric", "matrix": [[0,0,0,0],[0,0,0,0],[0,0,0,0],[0,0,0,1]]})", "constant"},
+        // a point: x^2 + y^2 + z^2 = 0
+        {R"({"type": "quadric", "matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,0]]})", "no voxels"},
+        // a double plane: x^2 = 0, never negative
+        {R"({"type": "quadric", "matrix": [[1,0,0,0],[0,0,0,0],[0,0,0,0],[0,0,0,0]]})", "no voxels"},
+        // an empty ellipsoid: x^2 + y^2 + z^2 + 1 = 0
+        {R"({"type": "quadric", "matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]})", "no voxels"},
+        // a sphere outside the bounds
+        {R"({"type": "sphere", "center": [5, 5, 5], "radius": 1})", "no voxels"},
+    };
+    const std::set<std::string> before = names();
+    for (const auto& [shape, expected] : cases) {
+        write("bad.json", R"({"voxel_size": 0.05, )" + bounds + R"("shape": )" + shape + "}");
+        const CliResult r = run({"rasterize", "bad.json", "-o", "out.vdb"});
+        EXPECT_EQ(r.exitCode, 1) << shape << "\n" << r.err;
+        EXPECT_NE(r.err.find("ivdb: error: bad.json"), std::string::npos) << shape << ": " << r.err;
+        EXPECT_NE(r.err.find(expected), std::string::npos) << shape << ": " << r.err;
+        std::set<std::string> expectedNames = before;
+        expectedNames.insert("bad.json");
+        EXPECT_EQ(leftovers(expectedNames), std::vector<std::string>{}) << shape;
+    }
+}
+
 // Extreme but valid settings work and give the closed-form band.
 TEST_F(TestCliRobust, ExtremeButValidSettingsWork)
 {

@@ -87,8 +87,8 @@ class PyopenvdbReadsIvdb(ic.TempDirTestCase):
                                                msg=where)
 
     def testIvdbInfoReportsLeafCountAndBackgroundOfEveryGrid(self):
-        """IVDB GAP: `ivdb info` reports 0 leaf nodes for the vec3s gradient grid (pyopenvdb and
-        vdb_print count 158); it also omits `background` for vector grids."""
+        """`ivdb info` counts the leaves and gives the background of every grid, vector grids
+        included (it once reported 0 leaves and no background for vec3s grids)."""
         for kind, (path, _) in self.outputs.items():
             grids = {g.name: g for g in self.vdb.readAll(path)[0]}
             for gi in ic.ivdbInfo(path)["grids"]:
@@ -174,9 +174,8 @@ class PyopenvdbReadsIvdb(ic.TempDirTestCase):
                         self.assertIn(grid.gridClass, ("level set", "fog volume"))
 
     def testEveryGridNamesItsCreator(self):
-        """IVDB GAP (Houdini convention): OpenVDB's grid-level `creator` metadata
-        (GridBase::setCreator; Houdini's vdb_creator intrinsic) is empty on every ivdb grid;
-        ivdb writes `creator` only in the file's metadata."""
+        """Houdini convention: OpenVDB's grid-level `creator` metadata (GridBase::setCreator;
+        Houdini's vdb_creator intrinsic) names ivdb on every grid, besides the file's."""
         for kind, (path, _) in self.outputs.items():
             for grid in self.vdb.readAll(path)[0]:
                 with self.subTest(kind=kind, grid=grid.name):

@@ -97,6 +97,17 @@ int runRender(const RenderOptions& opt)
             throw std::runtime_error("--size must be WxH with each in [1, 16384], got '" + opt.size + "'");
         }
     }
+    {
+        // The image's buffers (colour, alpha, depth, normal) and the encoder's copy.
+        const double need = double(w) * double(h) * 48.0;
+        const double available = double(util::availableMemory()); // 0 when unknown
+        if (available > 0.0 && need > 0.8 * available) {
+            throw std::runtime_error("--size " + opt.size + ": the image needs about " +
+                                     util::formatBytes(need) + " but only " +
+                                     util::formatBytes(0.8 * available) +
+                                     " may be used: use a smaller --size");
+        }
+    }
     std::optional<std::pair<double, double>> range;
     if (!opt.range.empty()) range = parseRange(opt.range);
     render::RenderSettings s;

@@ -6,6 +6,7 @@
 #include <openvdb/tree/LeafManager.h>
 
 #include <cmath>
+#include <atomic>
 #include <limits>
 
 namespace ivdb::levelset {
@@ -34,8 +35,33 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& samples, double halfWidth
     const int sweepSteps = int(std::ceil(halfWidth));
     auto inBand = [bg](float v) { return std::abs(v) < bg; };
 
-    // Voxels next to a sign change (a face neighbour on the other side of zero).
     FloatTree& tree = samples.tree();
+    auto empty = [&]() { // no surface: an empty band
+        auto g = openvdb::FloatGrid::create(bg);
+        g->setTransform(samples.transform().copy());
+        return g;
+    };
+    // A sample of exactly 0 (a voxel centre on a face of a box, say) is inside here (v > 0 is
+    // outside) but outside for FastSweeping (v < iso is inside), which then neither seeds it nor
+    // keeps it: a voxel on a box edge came out 1.3 voxels off. The smallest negative float makes
+    // it inside for both. Without a strictly negative sample there is no inside at all, only a
+    // zero set without area (the point x^2 + y^2 + z^2 = 0, the double plane x^2 = 0): no surface.
+    std::atomic<bool> anyInside{false};
+    {
+        openvdb::tree::LeafManager<FloatTree> leaves(tree);
+        leaves.foreach([&anyInside](LeafT& leaf, size_t) {
+            float* buf = leaf.buffer().data();
+            bool inside = false;
+            for (auto it = leaf.beginValueOn(); it; ++it) {
+                float& v = buf[it.pos()];
+                if (v < 0.0f) inside = true;
+                if (v == 0.0f) v = -std::numeric_limits<float>::min();
+            }
+            if (inside) anyInside = true;
+        });
+    }
+    if (!anyInside) return empty();
+    // Voxels next to a sign change (a face neighbour on the other side of zero).
     MaskTree interface(tree, false, openvdb::TopologyCopy());
     {
         openvdb::tree::LeafManager<MaskTree> masks(interface);
@@ -62,11 +88,6 @@ openvdb::FloatGrid::Ptr redistance(openvdb::FloatGrid& samples, double halfWidth
     openvdb::tools::dilateActiveValues(interface, sweepSteps, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::IGNORE_TILES);
     tree.topologyIntersection(interface);
-    auto empty = [&]() { // no surface: an empty band
-        auto g = openvdb::FloatGrid::create(bg);
-        g->setTransform(samples.transform().copy());
-        return g;
-    };
     if (tree.activeVoxelCount() == 0) return empty();
 
     // OpenVDB's sdfToSdf, with the voxels next to the interface (the boundary condition) keeping
