@@ -3,16 +3,20 @@
 #   1. the test suite under AddressSanitizer + UndefinedBehaviorSanitizer (clang, build-asan/),
 #      the same build instrumented for libFuzzer;
 #   2. each libFuzzer target for FUZZ_SECONDS (default 60) from the seed corpus in tests/fuzz/;
-#   3. the TBB code (rasterizer, differential operators, grid CSG and blends) under
-#      ThreadSanitizer (build-tsan/).
+#   3. on request (SANITIZE_STAGES="... tsan"), the TBB code (rasterizer, differential operators,
+#      grid CSG and blends) under ThreadSanitizer (build-tsan/). Not in CI: Debian's libtbb is not
+#      instrumented, and TSan reports TBB's own partitioner bookkeeping (see README, Reliability).
 # Any sanitizer report, fuzz crash or failing test fails the script. Stages: SANITIZE_STAGES
-# (default "asan fuzz tsan").
+# (default "asan fuzz"). The fuzzers start from a fixed seed, so a shorter run (a slower
+# machine) replays a prefix of a longer one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
 
-stages=${SANITIZE_STAGES:-asan fuzz tsan}
+stages=${SANITIZE_STAGES:-asan fuzz}
 fuzz_seconds=${FUZZ_SECONDS:-60}
+# FUZZ_STRICT=0 reports a fuzz failure (and keeps its input) without failing the script.
+fuzz_strict=${FUZZ_STRICT:-1}
 # Clones in other folders share the compiler cache (the sources' absolute paths stay out of it).
 export CCACHE_NOHASHDIR=1 CCACHE_BASEDIR="$PWD"
 # -O1 with line tables: reports with file:line, builds about twice as fast as -O2 -g.
@@ -47,15 +51,19 @@ if [[ " $stages " == *" fuzz "* ]]; then
     mkdir -p "$work/corpus" "$work/artifacts"
     extra=()
     [ "$target" = fuzz_scene ] && extra+=(-dict=tests/fuzz/scene.dict -max_len=4096)
+    # OpenVDB's readTopology leaks the node it was reading when a damaged file makes it throw
+    # (RootNode.h:2449, InternalNode.h:2255): harmless for a run that ends on the error, and not
+    # ours to fix. The test suite keeps leak detection on.
+    [ "$target" = fuzz_vdb ] && extra+=(-detect_leaks=0)
     echo "sanitize: fuzzing $target for ${fuzz_seconds}s" >&2
     if ! build-asan/tests/fuzz/$target "$work/corpus" "tests/fuzz/corpus/$target" \
-         "tests/fuzz/regress/$target" -max_total_time="$fuzz_seconds" -timeout=20 \
+         "tests/fuzz/regress/$target" -max_total_time="$fuzz_seconds" -seed=1 -timeout=20 \
          -rss_limit_mb=4096 -print_final_stats=1 -artifact_prefix="$work/artifacts/" \
          "${extra[@]}" 2>"$work/log.txt"; then
       tail -60 "$work/log.txt" >&2
       echo "sanitize: $target found a failure: the input is in $work/artifacts/; copy it to" \
            "tests/fuzz/regress/$target/ as a regression test and fix the cause" >&2
-      exit 1
+      [ "$fuzz_strict" = 1 ] && exit 1
     fi
     grep -E "^stat::(number_of_executed_units|new_units_added|peak_rss_mb)|^Done" "$work/log.txt" >&2 || true
   done
