@@ -122,7 +122,7 @@ protected:
     int sweep(const std::string& good, const std::vector<std::string>& args, int cuts, int flips)
     {
         const std::set<std::string> before = names();
-        int refused = 0, runs = 0;
+        int refused = 0, runs = 0, crashed = 0;
         for (const BadInput& bad : damagedVersions(good, cuts, flips)) {
             const std::string name = "bad.vdb";
             if (bad.isFolder) fs::create_directory(mDir / name);
@@ -133,6 +133,7 @@ protected:
             ++runs;
             const std::string what = "ivdb " + args.front() + " on a file " + bad.label;
             EXPECT_LT(r.exitCode, 128) << what << ": killed by a signal or timed out\n" << r.err;
+            if (r.exitCode >= 128) ++crashed;
             std::set<std::string> expected = before;
             expected.insert(name);
             if (r.exitCode != 0) {
@@ -151,7 +152,8 @@ protected:
         }
         std::cout << "[ robust ] ivdb " << args.front() << ": " << runs << " damaged inputs, "
                   << refused << " refused with an error, " << runs - refused
-                  << " accepted (a flipped byte left a valid file), 0 crashes" << std::endl;
+                  << " accepted (a flipped byte left a valid file), " << crashed
+                  << " killed by a signal or timed out" << std::endl;
         RecordProperty("damaged_inputs", runs);
         RecordProperty("refused", refused);
         return refused;
