@@ -63,7 +63,7 @@ if [[ " $stages " == *" fuzz "* ]]; then
       tail -60 "$work/log.txt" >&2
       echo "sanitize: $target found a failure: the input is in $work/artifacts/; copy it to" \
            "tests/fuzz/regress/$target/ as a regression test and fix the cause" >&2
-      [ "$fuzz_strict" = 1 ] && exit 1
+      if [ "$fuzz_strict" = 1 ]; then exit 1; fi
     fi
     grep -E "^stat::(number_of_executed_units|new_units_added|peak_rss_mb)|^Done" "$work/log.txt" >&2 || true
   done
