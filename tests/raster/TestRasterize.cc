@@ -279,6 +279,24 @@ TEST_F(TestRasterize, DenseRefusesWhatDoesNotFit)
     EXPECT_GT(raster::rasterize(sphere, s)->activeVoxelCount(), 0u);
 }
 
+// The sparse path estimates its leaves before allocating: within a factor of 2 of the grid it
+// builds (an exact sphere), and refused, naming the estimate, above its limit.
+TEST_F(TestRasterize, SparseRefusesWhatDoesNotFit)
+{
+    auto sphere = std::make_shared<implicit::Sphere>(Vec3d(0.0), 1.0);
+    raster::RasterSettings s = settings(0.005);
+    const double used = double(raster::rasterize(sphere, s)->memUsage());
+    s.memoryLimit = std::uint64_t(0.5 * used);
+    try {
+        raster::rasterize(sphere, s);
+        FAIL() << "a sparse grid over its memory limit must be refused";
+    } catch (const openvdb::RuntimeError& e) {
+        EXPECT_NE(std::string(e.what()).find("would need about"), std::string::npos) << e.what();
+    }
+    s.memoryLimit = std::uint64_t(2.0 * used);
+    EXPECT_GT(raster::rasterize(sphere, s)->activeVoxelCount(), 0u);
+}
+
 TEST_F(TestRasterize, SparseEqualsDenseForDataScenes)
 {
     size_t scenes = 0;

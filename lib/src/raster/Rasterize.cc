@@ -189,6 +189,13 @@ struct Level1Result
 /// Blocks between OpenVDB's 128^3 internal nodes and its 8^3 leaves in the descent.
 constexpr int kBlock = 32;
 
+/// Bytes the rasterizer may allocate: the caller's limit, else 80% of the available memory.
+double memoryBudget(std::uint64_t limit)
+{
+    const double available = double(util::availableMemory()); // 0 when unknown
+    return limit ? double(limit) : available > 0.0 ? 0.8 * available : 1e18;
+}
+
 /// The sparse path's memory, estimated before it allocates: the straddling level-2 nodes are
 /// known; up to 8 of them (evenly spread) count their straddling 128^3 children, and up to 16 of
 /// those count their straddling leaves (interval tests only, no voxels). Refuses, with the
@@ -237,13 +244,15 @@ void checkSparseMemory(const Context& ctx, const std::vector<TaskT>& level2)
     // A leaf's values and masks; re-distancing (fast sweeping) holds about two more copies.
     const double perLeaf = double(sizeof(LeafT) + LeafT::SIZE * sizeof(float)) * (ctx.exact ? 1.0 : 3.0);
     const double need = leafCount * perLeaf + level1 * double(sizeof(Int1T));
-    const double available = double(util::availableMemory()); // 0 when unknown
-    const double limit = ctx.memoryLimit ? double(ctx.memoryLimit)
-                       : available > 0.0 ? 0.8 * available
-                                         : 1e18;
+    const double limit = memoryBudget(ctx.memoryLimit);
     // The level-1 task list itself: 24 bytes per 128^3 node of every straddling 4096^3 node.
-    const double tasks = double(level2.size()) * double((d2 / d1) * (d2 / d1) * (d2 / d1));
-    if (need > limit || tasks > 2e8) {
+    if (double(level2.size()) * double((d2 / d1) * (d2 / d1) * (d2 / d1)) > 2e8) {
+        OPENVDB_THROW(openvdb::RuntimeError, "the surface crosses " +
+            std::to_string(level2.size()) + " nodes of 4096^3 voxels at voxel size " +
+            util::formatNumber(ctx.dx) + ", too many to visit: use a larger voxel size or "
+            "smaller bounds");
+    }
+    if (need > limit) {
         std::ostringstream os;
         os << "the narrow band at voxel size " << util::formatNumber(ctx.dx) << " would need about "
            << util::formatBytes(need) << " (about " << std::uint64_t(leafCount)
@@ -668,10 +677,7 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
         const Coord d = ctx.region.dim();
         // In double: the product of three dimensions of up to 2^31 voxels overflows 64 bits.
         const double need = double(d.x()) * double(d.y()) * double(d.z()) * sizeof(float);
-        const double available = double(util::availableMemory()); // 0 when unknown
-        const double limit = settings.memoryLimit ? double(settings.memoryLimit)
-                           : available > 0.0           ? 0.8 * available
-                                                       : 1e18;
+        const double limit = memoryBudget(settings.memoryLimit);
         if (need > limit) {
             std::ostringstream os;
             os << "dense sampling of " << d.x() << " x " << d.y() << " x " << d.z()
