@@ -8,9 +8,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <csignal>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -83,7 +85,8 @@ protected:
     /// within bounded memory. The read runs in a child process (10 s alarm, address space
     /// limited to 1.5 GB more than now), so a crash, a hang or a runaway allocation on a
     /// corrupt file is reported as a failure instead of taking the test run down.
-    static void expectReadFails(const std::string& p, const std::string& what)
+    static void expectReadFails(const std::string& p, const std::string& what,
+                                const std::string& needle = std::string())
     {
         enum Outcome { kIoErrorWithPath = 10, kIoErrorWithoutPath, kOtherException, kNoThrow,
                        kOutOfMemory };
@@ -139,7 +142,10 @@ protected:
         }
         ASSERT_TRUE(WIFEXITED(status));
         switch (WEXITSTATUS(status)) {
-        case kIoErrorWithPath: break;
+        case kIoErrorWithPath:
+            EXPECT_NE(text.find(needle), std::string::npos)
+                << what << ": the message does not say '" << needle << "': " << text;
+            break;
         case kIoErrorWithoutPath:
             ADD_FAILURE() << what << ": message does not name the path: " << text;
             break;
@@ -366,6 +372,62 @@ TEST_F(TestVdbFile, ReadTruncated)
         expectReadFails(cut, "truncated at " + std::to_string(n) + " of " +
                                  std::to_string(bytes.size()) + " bytes");
     }
+}
+
+TEST_F(TestVdbFile, ReadRefusesDamagedTransformAndRootRecords)
+{
+    // A sphere (root children) and two root-level tiles, one active, one inactive.
+    auto grid = makeSphere(1.0f, 0.1f);
+    grid->tree().addTile(/*level=*/3, openvdb::Coord(8192, 0, -4096), 2.5f, /*active=*/true);
+    grid->tree().addTile(3, openvdb::Coord(-8192, 4096, 0), -1.5f, /*active=*/false);
+    const std::string full = path("tiles.vdb");
+    ivdb::io::writeVdb(full, {grid});
+    const std::string bytes = readBytes(full);
+    const auto read = ivdb::io::readVdb(full);
+    ASSERT_EQ(read.size(), 1u);
+    auto back = openvdb::gridPtrCast<openvdb::FloatGrid>(read[0]);
+    ASSERT_TRUE(back);
+    EXPECT_EQ(back->tree().getValue(openvdb::Coord(8192 + 5, 7, -4096 + 9)), 2.5f);
+    EXPECT_TRUE(back->tree().isValueOn(openvdb::Coord(8192, 0, -4096)));
+
+    // Each root tile record is: origin (3 x int32), value (float), active (1 byte).
+    const auto record = [&](std::int32_t x, std::int32_t y, std::int32_t z, float v) {
+        std::string key(16, '\0');
+        const std::int32_t xyz[3] = {x, y, z};
+        std::memcpy(&key[0], xyz, 12);
+        std::memcpy(&key[12], &v, 4);
+        const std::size_t at = bytes.find(key);
+        EXPECT_NE(at, std::string::npos);
+        EXPECT_EQ(bytes.find(key, at + 1), std::string::npos) << "the record is not unique";
+        return at;
+    };
+    const std::size_t active = record(8192, 0, -4096, 2.5f);
+    const std::size_t inactive = record(-8192, 4096, 0, -1.5f);
+    ASSERT_NE(active, std::string::npos);
+    ASSERT_NE(inactive, std::string::npos);
+    ASSERT_EQ(bytes[active + 16], '\1');
+    ASSERT_EQ(bytes[inactive + 16], '\0');
+
+    const auto damaged = [&](const std::string& name, std::size_t at, const std::string& with) {
+        std::string copy = bytes;
+        copy.replace(at, with.size(), with);
+        const std::string out = path(name + ".vdb");
+        writeBytes(out, copy);
+        return out;
+    };
+    // An "active" flag that is not a bool: OpenVDB would read it into a bool (undefined).
+    expectReadFails(damaged("flag", active + 16, "\x02"), "active flag 2", "root tile");
+    expectReadFails(damaged("flag2", inactive + 16, "\xff"), "active flag 255", "root tile");
+    // A tile origin off the root's 4096-voxel grid.
+    expectReadFails(damaged("origin", active, "\x01\x20"), "origin 8193", "root tile");
+    // A tile count the file cannot hold: 12 bytes before the first record (tiles, children).
+    const std::size_t first = std::min(active, inactive);
+    expectReadFails(damaged("count", first - 8, std::string("\xff\xff\xff\x7f", 4)),
+                    "2^31 tiles", "root tiles");
+    // A transform of a type OpenVDB does not know.
+    const std::size_t map = bytes.find("UniformScaleMap");
+    ASSERT_NE(map, std::string::npos);
+    expectReadFails(damaged("map", map, "UniformScaleMaq"), "unknown map", "unknown type");
 }
 
 TEST_F(TestVdbFile, DescribeGrid)

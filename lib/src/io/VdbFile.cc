@@ -3,8 +3,10 @@
 #include <ivdb/util/System.h>
 
 #include <openvdb/io/Archive.h>
+#include <openvdb/io/Compression.h>
 #include <openvdb/io/File.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <csignal>
@@ -138,6 +140,27 @@ public:
         }
     }
 
+    /// A transform: the map's type name, then its fields (all doubles, fixed in size per type).
+    void transform(std::uint64_t end, const std::string& grid, int depth = 0)
+    {
+        const std::string type = str(end);
+        if (type == "AffineMap" || type == "UnitaryMap") {
+            skip(16 * 8, end);                      // Mat4d
+        } else if (type == "ScaleMap" || type == "UniformScaleMap") {
+            skip(5 * 3 * 8, end);                   // scale, voxel size and three inverses
+        } else if (type == "ScaleTranslateMap" || type == "UniformScaleTranslateMap") {
+            skip(6 * 3 * 8, end);                   // translation, then as ScaleMap
+        } else if (type == "TranslationMap") {
+            skip(3 * 8, end);
+        } else if (type == "NonlinearFrustumMap" && depth == 0) {
+            skip(2 * 3 * 8 + 2 * 8, end);           // bounding box, taper, depth
+            transform(end, grid, depth + 1);        // its linear part
+        } else {
+            corrupt("grid '" + grid.substr(0, 64) + "' has a transform of unknown type '" +
+                    type.substr(0, 64) + "'");
+        }
+    }
+
     [[noreturn]] void corrupt(const std::string& why) const
     {
         ioError(mPath, "not a valid .vdb file: " + why);
@@ -149,7 +172,202 @@ private:
     std::ifstream mIn;
 };
 
-/// Check the header, the file metadata, every grid descriptor's offsets and every grid's metadata.
+/// What the root node's records of a tree type look like ("Tree_float_5_4_3", with an optional
+/// "_HalfFloat"); valueBytes is 0 for a value type not listed here, whose records are not checked.
+struct TreeLayout
+{
+    std::uint64_t valueBytes = 0;
+    std::uint64_t halfBytes = 0; // a value as half floats ("_HalfFloat" grids of real values)
+    bool boolValues = false; // values are C++ bools, so a byte other than 0 or 1 is invalid
+    bool half = false;       // the grid stores its real values as half floats
+    int rootChildLog2 = 0;   // log2 of the root's children's width in voxels
+    /// Node widths (log2) from the root's children down to plain leaves, when the whole topology
+    /// is checked: the standard 5-4-3 trees of plain (not bool, mask or point) values.
+    std::vector<int> nodeLog2;
+};
+
+TreeLayout treeLayout(const std::string& gridType)
+{
+    TreeLayout layout;
+    std::vector<std::string> parts;
+    std::istringstream in(gridType);
+    for (std::string part; std::getline(in, part, '_');) parts.push_back(part);
+    if (parts.size() < 3 || parts[0] != "Tree") return layout;
+    static const std::pair<const char*, std::uint64_t> kSizes[] = {
+        {"bool", 1}, {"mask", 1}, {"half", 2}, {"float", 4}, {"double", 8}, {"int32", 4},
+        {"int64", 8}, {"uint32", 4}, {"ptdataidx32", 4}, {"ptdataidx64", 8}, {"vec2i", 8},
+        {"vec2s", 8}, {"vec2d", 16}, {"vec3i", 12}, {"vec3s", 12}, {"vec3d", 24}};
+    for (const auto& [name, bytes] : kSizes) {
+        if (parts[1] == name) layout.valueBytes = bytes;
+    }
+    layout.boolValues = parts[1] == "bool";
+    static const std::pair<const char*, std::uint64_t> kHalfSizes[] = {
+        {"float", 2}, {"double", 2}, {"vec2s", 4}, {"vec2d", 4}, {"vec3s", 6}, {"vec3d", 6}};
+    for (const auto& [name, bytes] : kHalfSizes) {
+        if (parts[1] == name) layout.halfBytes = bytes;
+    }
+    std::vector<int> log2;
+    for (std::size_t i = 2; i < parts.size(); ++i) {
+        if (parts[i] == "HalfFloat" && i + 1 == parts.size()) {
+            layout.half = true;
+            continue;
+        }
+        if (parts[i].empty() || parts[i].size() > 2 ||
+            parts[i].find_first_not_of("0123456789") != std::string::npos) {
+            return TreeLayout();
+        }
+        log2.push_back(std::stoi(parts[i]));
+        layout.rootChildLog2 += log2.back();
+    }
+    if (layout.rootChildLog2 == 0 || layout.rootChildLog2 > 30) return TreeLayout();
+    static const char* const kPlain[] = {"float", "double", "int32", "int64", "vec3i", "vec3s",
+                                         "vec3d"};
+    const bool plain = std::find(std::begin(kPlain), std::end(kPlain), parts[1]) != std::end(kPlain);
+    if (plain && log2 == std::vector<int>{5, 4, 3}) layout.nodeLog2 = log2;
+    return layout;
+}
+
+/// Walks a tree's topology as OpenVDB 10 reads it (InternalNode::readTopology,
+/// io::readCompressedValues, LeafNode::readTopology), with every count checked against the
+/// bytes before the grid's voxel data. OpenVDB reads on past the end of a damaged topology and
+/// allocates a node for every bit its (then unread) masks hold: a 28 kB file took 24 GB.
+class TopologyWalker
+{
+public:
+    TopologyWalker(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
+                   std::uint64_t end, const std::string& where)
+        : mIn(in), mLayout(layout), mCompression(compression), mEnd(end), mWhere(where) {}
+
+    /// A node of mLayout.nodeLog2[level]: an internal node, or a leaf at the last level.
+    void node(std::size_t level)
+    {
+        const std::uint64_t count = std::uint64_t(1) << (3 * mLayout.nodeLog2[level]);
+        const std::uint64_t maskBytes = count / 8;
+        if (level + 1 == mLayout.nodeLog2.size()) {
+            mIn.skip(maskBytes, mEnd); // a leaf's topology is its value mask
+            return;
+        }
+        std::vector<std::uint64_t> children(count / 64), active(count / 64);
+        mIn.bytes(children.data(), maskBytes, mEnd);
+        mIn.bytes(active.data(), maskBytes, mEnd);
+        std::uint64_t childCount = 0, activeCount = 0;
+        for (std::size_t w = 0; w < children.size(); ++w) {
+            childCount += std::uint64_t(__builtin_popcountll(children[w]));
+            activeCount += std::uint64_t(__builtin_popcountll(active[w]));
+        }
+        // Each child needs at least its own masks: refuse a count the bytes cannot hold before
+        // descending (which would also be OpenVDB's allocation).
+        const std::uint64_t childMaskBytes = (std::uint64_t(1) << (3 * mLayout.nodeLog2[level + 1])) / 8;
+        values(count, activeCount, maskBytes);
+        if (childCount * childMaskBytes > mEnd - mIn.pos()) {
+            mIn.corrupt(mWhere + "has a node with " + std::to_string(childCount) +
+                        " children, more than its bytes can hold");
+        }
+        for (std::size_t w = 0; w < children.size(); ++w) {
+            for (std::uint64_t bits = children[w]; bits; bits &= bits - 1) node(level + 1);
+        }
+    }
+
+private:
+    /// An internal node's values, as io::readCompressedValues reads them.
+    void values(std::uint64_t count, std::uint64_t activeCount, std::uint64_t maskBytes)
+    {
+        namespace vio = openvdb::io;
+        unsigned char how = 0; // which of the value-compression cases follows
+        mIn.bytes(&how, 1, mEnd);
+        if (how > vio::NO_MASK_AND_ALL_VALS) {
+            mIn.corrupt(mWhere + "has a node whose values are stored in an unknown way (" +
+                        std::to_string(int(how)) + ")");
+        }
+        if (how == vio::NO_MASK_AND_ONE_INACTIVE_VAL || how == vio::MASK_AND_ONE_INACTIVE_VAL) {
+            mIn.skip(mLayout.valueBytes, mEnd);
+        } else if (how == vio::MASK_AND_TWO_INACTIVE_VALS) {
+            mIn.skip(2 * mLayout.valueBytes, mEnd);
+        }
+        if (how == vio::MASK_AND_NO_INACTIVE_VALS || how == vio::MASK_AND_ONE_INACTIVE_VAL ||
+            how == vio::MASK_AND_TWO_INACTIVE_VALS) {
+            mIn.skip(maskBytes, mEnd); // selection mask
+        }
+        std::uint64_t stored = count;
+        if ((mCompression & vio::COMPRESS_ACTIVE_MASK) && how != vio::NO_MASK_AND_ALL_VALS) {
+            stored = activeCount;
+        }
+        const bool half = mLayout.half && mLayout.halfBytes > 0;
+        if (half && stored == 0) return; // OpenVDB's half reader reads nothing then
+        const std::uint64_t bytes = stored * (half ? mLayout.halfBytes : mLayout.valueBytes);
+        if (!(mCompression & (vio::COMPRESS_BLOSC | vio::COMPRESS_ZIP))) {
+            mIn.skip(bytes, mEnd);
+            return;
+        }
+        const std::int64_t block = mIn.i64(mEnd); // compressed bytes, or minus the raw bytes
+        if (block <= 0) {
+            const std::uint64_t raw = std::uint64_t(-(block + 1)) + 1;
+            if (raw != bytes) {
+                mIn.corrupt(mWhere + "has a value block of " + std::to_string(raw) +
+                            " bytes where " + std::to_string(bytes) + " were expected");
+            }
+            mIn.skip(raw, mEnd);
+        } else {
+            if (std::uint64_t(block) > bytes + bytes / 100 + 1024) {
+                mIn.corrupt(mWhere + "has a compressed block of " + std::to_string(block) +
+                            " bytes for " + std::to_string(bytes) + " bytes of values");
+            }
+            mIn.skip(std::uint64_t(block), mEnd);
+        }
+    }
+
+    LayoutReader& mIn;
+    const TreeLayout& mLayout;
+    std::uint32_t mCompression;
+    std::uint64_t mEnd;
+    std::string mWhere;
+};
+
+/// The root node's tile records, which OpenVDB reads without checking: a tile's "active" flag
+/// is read straight into a bool (undefined behaviour for a byte other than 0 or 1), and a
+/// damaged tile count makes it read past its bytes.
+void checkRootNode(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
+                   std::uint64_t end, const std::string& grid)
+{
+    const std::string where = "grid '" + grid.substr(0, 64) + "' ";
+    in.skip(4, end); // buffer count
+    std::vector<unsigned char> value(layout.valueBytes);
+    in.bytes(value.data(), value.size(), end); // background
+    if (layout.boolValues && value[0] > 1) in.corrupt(where + "has an invalid background");
+    const std::uint32_t tiles = in.u32(end), children = in.u32(end);
+    const std::uint64_t tileBytes = 12 + layout.valueBytes + 1;
+    if (tiles * tileBytes + std::uint64_t(children) * 12 > end - in.pos()) {
+        in.corrupt(where + "claims " + std::to_string(tiles) + " root tiles and " +
+                   std::to_string(children) + " children, more than its bytes can hold");
+    }
+    const std::int64_t alignment = (std::int64_t(1) << layout.rootChildLog2) - 1;
+    for (std::uint32_t i = 0; i < tiles; ++i) {
+        std::int32_t origin[3];
+        in.bytes(origin, sizeof(origin), end);
+        in.bytes(value.data(), value.size(), end);
+        unsigned char active = 0;
+        in.bytes(&active, 1, end);
+        if (active > 1 || (layout.boolValues && value[0] > 1) || (origin[0] & alignment) ||
+            (origin[1] & alignment) || (origin[2] & alignment)) {
+            in.corrupt(where + "has an invalid root tile record (number " + std::to_string(i) +
+                       " of " + std::to_string(tiles) + ")");
+        }
+    }
+    if (layout.nodeLog2.empty()) return;
+    TopologyWalker walker(in, layout, compression, end, where);
+    for (std::uint32_t i = 0; i < children; ++i) {
+        std::int32_t origin[3];
+        in.bytes(origin, sizeof(origin), end);
+        if ((origin[0] & alignment) || (origin[1] & alignment) || (origin[2] & alignment)) {
+            in.corrupt(where + "has a root child at an invalid origin (number " +
+                       std::to_string(i) + " of " + std::to_string(children) + ")");
+        }
+        walker.node(0);
+    }
+}
+
+/// Check the header, the file metadata, every grid descriptor's offsets, and every grid's
+/// metadata, transform and root node.
 void validateLayout(const std::string& path)
 {
     std::error_code ec;
@@ -174,13 +392,13 @@ void validateLayout(const std::string& path)
     const std::int32_t count = std::int32_t(in.u32(size));
     if (count <= 0) ioError(path, "holds no grids");
     if (std::uint64_t(count) * 36 > size - in.pos()) in.corrupt("its grid count is impossible");
-    struct Desc { std::string name; std::int64_t grid, block, end; };
+    struct Desc { std::string name, type; bool instance; std::int64_t grid, block, end; };
     std::vector<Desc> grids;
     for (std::int32_t i = 0; i < count; ++i) {
         Desc d;
         d.name = in.str(size);
-        in.str(size);                                  // grid type
-        if (version >= openvdb::OPENVDB_FILE_VERSION_GRID_INSTANCING) in.str(size);
+        d.type = in.str(size);
+        d.instance = !in.str(size).empty(); // the grid whose tree this one shares, if any
         d.grid = in.i64(size);
         d.block = in.i64(size);
         d.end = in.i64(size);
@@ -198,8 +416,14 @@ void validateLayout(const std::string& path)
     }
     for (const Desc& d : grids) {
         in.seek(std::uint64_t(d.grid));
-        in.u32(std::uint64_t(d.block)); // compression flags
-        in.metaMap(std::uint64_t(d.block));
+        const std::uint64_t end = std::uint64_t(d.block);
+        const std::uint32_t compression = in.u32(end);
+        in.metaMap(end);
+        in.transform(end, d.name);
+        const TreeLayout layout = treeLayout(d.type);
+        if (!d.instance && layout.valueBytes > 0) {
+            checkRootNode(in, layout, compression, end, d.name);
+        }
     }
 }
 
