@@ -3,6 +3,7 @@
 #include <ivdb/io/VdbFile.h>
 
 #include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
@@ -428,6 +429,73 @@ TEST_F(TestVdbFile, ReadRefusesDamagedTransformAndRootRecords)
     const std::size_t map = bytes.find("UniformScaleMap");
     ASSERT_NE(map, std::string::npos);
     expectReadFails(damaged("map", map, "UniformScaleMaq"), "unknown map", "unknown type");
+}
+
+TEST_F(TestVdbFile, ReadsStreamsAndSharedTreesAndRefusesOtherFormats)
+{
+    auto sphere = makeSphere(1.0f, 0.1f);
+    auto shared = sphere->copyGrid(); // shares the tree: written as an instance
+    shared->setName("shared");
+    auto vectors = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    vectors->setName("vectors");
+    vectors->fill(openvdb::CoordBBox(openvdb::Coord(-20), openvdb::Coord(20)),
+                  openvdb::Vec3s(1.0f, 2.0f, 3.0f));
+    const openvdb::GridCPtrVec grids = {sphere, shared, vectors};
+
+    // io::File's layout (with grid offsets), through ivdb's writer
+    const std::string file = path("file.vdb");
+    ivdb::io::writeVdb(file, grids);
+    // io::Stream's layout (no offsets: each grid follows its record), saved to a file
+    const std::string stream = path("stream.vdb");
+    {
+        std::ofstream out(stream, std::ios::binary);
+        openvdb::io::Stream(out).write(grids);
+    }
+    for (const std::string& p : {file, stream}) {
+        SCOPED_TRACE(p);
+        const auto read = ivdb::io::readVdb(p);
+        ASSERT_EQ(read.size(), 3u);
+        auto a = openvdb::gridPtrCast<openvdb::FloatGrid>(read[0]);
+        auto b = openvdb::gridPtrCast<openvdb::FloatGrid>(read[1]);
+        auto v = openvdb::gridPtrCast<openvdb::Vec3SGrid>(read[2]);
+        ASSERT_TRUE(a && b && v);
+        EXPECT_EQ(a->activeVoxelCount(), sphere->activeVoxelCount());
+        EXPECT_EQ(b->activeVoxelCount(), sphere->activeVoxelCount());
+        EXPECT_EQ(v->activeVoxelCount(), vectors->activeVoxelCount());
+        EXPECT_EQ(v->tree().getValue(openvdb::Coord(3, -4, 5)), openvdb::Vec3s(1.0f, 2.0f, 3.0f));
+        const openvdb::Coord ijk(0, 0, 10);
+        EXPECT_EQ(a->tree().getValue(ijk), sphere->tree().getValue(ijk));
+    }
+    // Truncated streams: the grids' own bytes are all that says where each ends.
+    const std::string bytes = readBytes(stream);
+    for (std::size_t n : {bytes.size() / 4, bytes.size() / 2, bytes.size() - 9}) {
+        const std::string cut = path("stream-cut-" + std::to_string(n) + ".vdb");
+        writeBytes(cut, bytes.substr(0, n));
+        expectReadFails(cut, "stream truncated at " + std::to_string(n));
+    }
+    // A stream with a grid type whose layout ivdb does not walk is refused, with what to do.
+    auto mask = openvdb::BoolGrid::create(false);
+    mask->setName("mask");
+    mask->fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(9)), true);
+    const std::string boolStream = path("bool-stream.vdb");
+    {
+        std::ofstream out(boolStream, std::ios::binary);
+        openvdb::io::Stream(out).write(openvdb::GridCPtrVec{mask});
+    }
+    expectReadFails(boolStream, "bool grid in a stream", "vdb_tool");
+    // ... and read from a file with offsets.
+    const std::string boolFile = path("bool-file.vdb");
+    ivdb::io::writeVdb(boolFile, {mask});
+    EXPECT_EQ(ivdb::io::readVdb(boolFile).size(), 1u);
+
+    // File format versions outside 222 (OpenVDB 1.0) to 224 (this OpenVDB's).
+    for (std::uint32_t version : {213u, 221u, 225u, 0x7fffffffu}) {
+        std::string copy = readBytes(file);
+        std::memcpy(&copy[8], &version, 4);
+        const std::string out = path("version-" + std::to_string(version) + ".vdb");
+        writeBytes(out, copy);
+        expectReadFails(out, "file format " + std::to_string(version), "file format");
+    }
 }
 
 TEST_F(TestVdbFile, DescribeGrid)

@@ -128,16 +128,60 @@ public:
         return s;
     }
 
-    /// A MetaMap: count, then (name, type name, byte count + value) per entry.
-    void metaMap(std::uint64_t end)
+    /// A MetaMap: count, then (name, type name, byte count + value) per entry. Returns the entry
+    /// count of its delayed-load table (type "__delayedload"), or -1 if it has none.
+    std::int64_t metaMap(std::uint64_t end)
     {
+        std::int64_t delayed = -1;
         const std::uint32_t count = u32(end);
         if (std::uint64_t(count) * 12 > end - mPos) corrupt("its metadata count is impossible");
         for (std::uint32_t i = 0; i < count; ++i) {
             str(end);
-            str(end);
-            skip(u32(end), end);
+            const std::string type = str(end);
+            const std::uint32_t bytes = u32(end);
+            if (bytes > end - mPos) corrupt("a metadata value claims more bytes than the file holds");
+            const std::uint64_t valueEnd = mPos + bytes;
+            if (type == "__delayedload" && bytes > 0) delayed = delayedLoad(valueEnd);
+            seek(valueEnd);
         }
+        return delayed;
+    }
+
+    /// io::DelayedLoadMetadata, which OpenVDB sizes by its entry count before reading anything
+    /// else: the count, then a byte per leaf and an int64 per leaf (the latter may be absent,
+    /// marked by 0xffffffff), each as a byte count and then raw (count 0) or blosc-compressed.
+    std::uint32_t delayedLoad(std::uint64_t end)
+    {
+        const std::uint32_t count = u32(end);
+        delayedLoadTable(count, 1, end, /*optional=*/false);
+        delayedLoadTable(count, 8, end, /*optional=*/true);
+        return count;
+    }
+
+    void delayedLoadTable(std::uint32_t count, std::uint64_t valueBytes, std::uint64_t end,
+                          bool optional)
+    {
+        const std::uint32_t bytes = u32(end);
+        if (optional && bytes == 0xffffffffu) return;
+        if (bytes == 0) {
+            skip(count * valueBytes, end);
+            return;
+        }
+        // A blosc block: its header holds the raw size (bytes 4-7) and its own size (12-15).
+        // (OpenVDB leaves tables under 48 bytes raw.)
+        unsigned char header[16];
+        if (bytes < sizeof(header)) corrupt("its delayed-load table is damaged");
+        this->bytes(header, sizeof(header), end);
+        std::uint32_t raw = 0, stored = 0;
+        std::memcpy(&raw, header + 4, 4);
+        std::memcpy(&stored, header + 12, 4);
+        // OpenVDB pads tables under 128 bytes to 128 before compressing them.
+        const std::uint64_t expected = count * valueBytes;
+        if ((raw != expected && !(expected < 128 && raw == 128)) || stored != bytes) {
+            corrupt("its delayed-load table is damaged (" + std::to_string(count) +
+                    " entries, but a block of " + std::to_string(raw) + " bytes)");
+        }
+        skip(bytes - sizeof(header), end);
     }
 
     /// A transform: the map's type name, then its fields (all doubles, fixed in size per type).
@@ -245,6 +289,7 @@ public:
         const std::uint64_t maskBytes = count / 8;
         if (level + 1 == mLayout.nodeLog2.size()) {
             mIn.skip(maskBytes, mEnd); // a leaf's topology is its value mask
+            ++mLeaves;
             return;
         }
         std::vector<std::uint64_t> children(count / 64), active(count / 64);
@@ -268,8 +313,24 @@ public:
         }
     }
 
+    /// The leaves' voxel data, as LeafNode::readBuffers reads it from a stream: per leaf, its
+    /// value mask, then its values.
+    void leafBuffers()
+    {
+        const std::uint64_t count = std::uint64_t(1) << (3 * mLayout.nodeLog2.back());
+        std::vector<std::uint64_t> mask(count / 64);
+        for (std::uint64_t i = 0; i < mLeaves; ++i) {
+            mIn.bytes(mask.data(), count / 8, mEnd);
+            std::uint64_t active = 0;
+            for (std::uint64_t word: mask) active += std::uint64_t(__builtin_popcountll(word));
+            values(count, active, count / 8);
+        }
+    }
+
+    std::uint64_t leaves() const { return mLeaves; }
+
 private:
-    /// An internal node's values, as io::readCompressedValues reads them.
+    /// A node's values, as io::readCompressedValues reads them.
     void values(std::uint64_t count, std::uint64_t activeCount, std::uint64_t maskBytes)
     {
         namespace vio = openvdb::io;
@@ -321,13 +382,14 @@ private:
     std::uint32_t mCompression;
     std::uint64_t mEnd;
     std::string mWhere;
+    std::uint64_t mLeaves = 0;
 };
 
 /// The root node's tile records, which OpenVDB reads without checking: a tile's "active" flag
 /// is read straight into a bool (undefined behaviour for a byte other than 0 or 1), and a
 /// damaged tile count makes it read past its bytes.
-void checkRootNode(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
-                   std::uint64_t end, const std::string& grid)
+std::int64_t checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
+                       std::uint64_t end, const std::string& grid, bool buffers)
 {
     const std::string where = "grid '" + grid.substr(0, 64) + "' ";
     in.skip(4, end); // buffer count
@@ -353,7 +415,7 @@ void checkRootNode(LayoutReader& in, const TreeLayout& layout, std::uint32_t com
                        " of " + std::to_string(tiles) + ")");
         }
     }
-    if (layout.nodeLog2.empty()) return;
+    if (layout.nodeLog2.empty()) return -1;
     TopologyWalker walker(in, layout, compression, end, where);
     for (std::uint32_t i = 0; i < children; ++i) {
         std::int32_t origin[3];
@@ -363,6 +425,44 @@ void checkRootNode(LayoutReader& in, const TreeLayout& layout, std::uint32_t com
                        std::to_string(i) + " of " + std::to_string(children) + ")");
         }
         walker.node(0);
+    }
+    if (buffers) walker.leafBuffers();
+    return std::int64_t(walker.leaves());
+}
+
+struct GridRecord
+{
+    std::string name, type;
+    bool instance = false; // shares the tree of an earlier grid, so stores none
+    std::int64_t grid = 0, block = 0, end = 0;
+};
+
+/// One grid's bytes, from its compression flags on: metadata, transform and (unless it shares
+/// another grid's tree) the tree; with @a buffers, also its voxel data, which in a file without
+/// grid offsets is the only way to find where the next grid starts.
+void checkGrid(LayoutReader& in, const GridRecord& d, std::uint64_t end, bool buffers)
+{
+    const std::string where = "grid '" + d.name.substr(0, 64) + "' ";
+    const std::uint64_t start = in.pos();
+    const std::uint32_t compression = in.u32(end);
+    const std::int64_t delayed = in.metaMap(end);
+    in.transform(end, d.name);
+    if (d.instance) return;
+    const TreeLayout layout = treeLayout(d.type);
+    if (buffers && layout.nodeLog2.empty()) {
+        in.corrupt(where + "is of type '" + d.type.substr(0, 64) + "', which ivdb reads only "
+                   "from a file with grid offsets (re-save it with OpenVDB's vdb_tool)");
+    }
+    // Every leaf stores at least a 64-byte value mask.
+    if (delayed > 0 && std::uint64_t(delayed) * 64 > end - start) {
+        in.corrupt(where + "has a delayed-load table of " + std::to_string(delayed) +
+                   " leaves, more than its bytes can hold");
+    }
+    if (layout.valueBytes == 0) return;
+    const std::int64_t leaves = checkTree(in, layout, compression, end, d.name, buffers);
+    if (leaves >= 0 && delayed >= 0 && leaves != delayed) {
+        in.corrupt(where + "has " + std::to_string(leaves) + " leaves but a delayed-load table "
+                   "of " + std::to_string(delayed));
     }
 }
 
@@ -380,31 +480,47 @@ void validateLayout(const std::string& path)
     in.bytes(&magic, 8, size);
     if (magic != openvdb::OPENVDB_MAGIC) ioError(path, "is not a .vdb file (no OpenVDB magic number)");
     const std::uint32_t version = in.u32(size);
-    // Older layouts differ; leave them to OpenVDB's reader.
-    if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) return;
+    // Older layouts differ, and OpenVDB reads them with fewer checks still; files that old (from
+    // before OpenVDB 1.0) can be brought up to date by re-saving them with OpenVDB.
+    if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION ||
+        version > openvdb::OPENVDB_FILE_VERSION) {
+        ioError(path, "is in OpenVDB file format " + std::to_string(version) + ", and ivdb reads "
+                "formats " + std::to_string(openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION) +
+                " to " + std::to_string(openvdb::OPENVDB_FILE_VERSION) + (version < 
+                openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION ? " (re-save it with OpenVDB's "
+                "vdb_tool: vdb_tool -read old.vdb -write new.vdb)" : " (a damaged file?)"));
+    }
     in.u32(size);           // library major
     in.u32(size);           // library minor
     char hasOffsets = 0;
     in.bytes(&hasOffsets, 1, size);
     in.skip(36, size);      // UUID
     in.metaMap(size);       // file metadata
-    if (!hasOffsets) return; // a stream, not a seekable file: no offsets to check
     const std::int32_t count = std::int32_t(in.u32(size));
     if (count <= 0) ioError(path, "holds no grids");
     if (std::uint64_t(count) * 36 > size - in.pos()) in.corrupt("its grid count is impossible");
-    struct Desc { std::string name, type; bool instance; std::int64_t grid, block, end; };
-    std::vector<Desc> grids;
-    for (std::int32_t i = 0; i < count; ++i) {
-        Desc d;
+    const auto readRecord = [&in, size]() {
+        GridRecord d;
         d.name = in.str(size);
         d.type = in.str(size);
         d.instance = !in.str(size).empty(); // the grid whose tree this one shares, if any
         d.grid = in.i64(size);
         d.block = in.i64(size);
         d.end = in.i64(size);
-        grids.push_back(d);
+        return d;
+    };
+    if (!hasOffsets) {
+        // A stream (io::Stream's layout) saved to a file: each grid follows its record.
+        for (std::int32_t i = 0; i < count; ++i) checkGrid(in, readRecord(), size, true);
+        return;
+    }
+    std::vector<GridRecord> grids;
+    for (std::int32_t i = 0; i < count; ++i) {
+        GridRecord d = readRecord();
         const std::uint64_t header = in.pos();
-        if (d.grid < std::int64_t(header) || d.block < d.grid || d.end < d.block ||
+        // A grid that shares another's tree has no voxel data, and no block offset.
+        const std::int64_t block = d.instance ? d.end : d.block;
+        if (d.grid < std::int64_t(header) || block < d.grid || d.end < block ||
             std::uint64_t(d.end) > size) {
             std::ostringstream os;
             os << "not a valid .vdb file: grid " << i << " ('" << d.name.substr(0, 64)
@@ -412,18 +528,13 @@ void validateLayout(const std::string& path)
                << " bytes (truncated?)";
             ioError(path, os.str());
         }
+        d.block = block;
+        grids.push_back(d);
         in.seek(std::uint64_t(d.end));
     }
-    for (const Desc& d : grids) {
+    for (const GridRecord& d : grids) {
         in.seek(std::uint64_t(d.grid));
-        const std::uint64_t end = std::uint64_t(d.block);
-        const std::uint32_t compression = in.u32(end);
-        in.metaMap(end);
-        in.transform(end, d.name);
-        const TreeLayout layout = treeLayout(d.type);
-        if (!d.instance && layout.valueBytes > 0) {
-            checkRootNode(in, layout, compression, end, d.name);
-        }
+        checkGrid(in, d, std::uint64_t(d.block), false);
     }
 }
 
