@@ -381,6 +381,7 @@ TEST_F(TestVdbFile, ReadRefusesDamagedTransformAndRootRecords)
     auto grid = makeSphere(1.0f, 0.1f);
     grid->tree().addTile(/*level=*/3, openvdb::Coord(8192, 0, -4096), 2.5f, /*active=*/true);
     grid->tree().addTile(3, openvdb::Coord(-8192, 4096, 0), -1.5f, /*active=*/false);
+    grid->insertMeta("flag", openvdb::BoolMetadata(true));
     const std::string full = path("tiles.vdb");
     ivdb::io::writeVdb(full, {grid});
     const std::string bytes = readBytes(full);
@@ -425,6 +426,20 @@ TEST_F(TestVdbFile, ReadRefusesDamagedTransformAndRootRecords)
     const std::size_t first = std::min(active, inactive);
     expectReadFails(damaged("count", first - 8, std::string("\xff\xff\xff\x7f", 4)),
                     "2^31 tiles", "root tiles");
+    // Metadata whose byte count is not its type's size: OpenVDB would read the type's size and
+    // then everything after it from the wrong place.
+    const std::string int32Key = std::string("answer") + std::string("\x05\0\0\0int32", 9);
+    const std::size_t answer = bytes.find(int32Key);
+    ASSERT_NE(answer, std::string::npos);
+    expectReadFails(damaged("metasize", answer + int32Key.size(), std::string("\x05", 1)),
+                    "int32 metadata of 5 bytes", "holds 5 bytes instead of 4");
+    // A bool metadata value that is not 0 or 1 (OpenVDB reads it straight into a bool).
+    const std::string boolKey = std::string("flag") + std::string("\x04\0\0\0bool\x01\0\0\0", 12);
+    const std::size_t flag = bytes.find(boolKey);
+    ASSERT_NE(flag, std::string::npos);
+    ASSERT_EQ(bytes[flag + boolKey.size()], '\1');
+    expectReadFails(damaged("metabool", flag + boolKey.size(), "\x07"), "bool metadata 7",
+                    "not a bool");
     // A transform of a type OpenVDB does not know.
     const std::size_t map = bytes.find("UniformScaleMap");
     ASSERT_NE(map, std::string::npos);

@@ -2,6 +2,7 @@
 
 #include <ivdb/util/System.h>
 
+#include <openvdb/Metadata.h>
 #include <openvdb/io/Archive.h>
 #include <openvdb/io/Compression.h>
 #include <openvdb/io/File.h>
@@ -136,15 +137,50 @@ public:
         const std::uint32_t count = u32(end);
         if (std::uint64_t(count) * 12 > end - mPos) corrupt("its metadata count is impossible");
         for (std::uint32_t i = 0; i < count; ++i) {
-            str(end);
+            const std::string name = str(end);
             const std::string type = str(end);
             const std::uint32_t bytes = u32(end);
             if (bytes > end - mPos) corrupt("a metadata value claims more bytes than the file holds");
             const std::uint64_t valueEnd = mPos + bytes;
-            if (type == "__delayedload" && bytes > 0) delayed = delayedLoad(valueEnd);
+            if (type == "__delayedload" && bytes > 0) {
+                delayed = delayedLoad(valueEnd);
+            } else if (type != "string") {
+                fixedSizeValue(name, type, bytes, valueEnd);
+            }
             seek(valueEnd);
         }
         return delayed;
+    }
+
+    /// OpenVDB reads a value of the standard fixed-size types by its type's size, whatever byte
+    /// count the file gives (and a bool straight into a bool), so a count that differs would make
+    /// it read everything after from the wrong place.
+    void fixedSizeValue(const std::string& name, const std::string& type, std::uint32_t bytes,
+                        std::uint64_t end)
+    {
+        static const std::pair<const char*, std::uint32_t> kSizes[] = {
+            {"bool", 1}, {"int32", 4}, {"int64", 8}, {"float", 4}, {"double", 8}, {"vec2i", 8},
+            {"vec2s", 8}, {"vec2d", 16}, {"vec3i", 12}, {"vec3s", 12}, {"vec3d", 24},
+            {"vec4i", 16}, {"vec4s", 16}, {"vec4d", 32}, {"mat4s", 64}, {"mat4d", 128}};
+        for (const auto& [known, size] : kSizes) {
+            if (type != known) continue;
+            if (bytes != size) {
+                corrupt("metadata '" + name.substr(0, 64) + "' of type " + type + " holds " +
+                        std::to_string(bytes) + " bytes instead of " + std::to_string(size));
+            }
+            if (type == "bool") {
+                unsigned char value = 0;
+                this->bytes(&value, 1, end);
+                if (value > 1) corrupt("metadata '" + name.substr(0, 64) + "' is not a bool");
+            }
+            return;
+        }
+        // Any other type OpenVDB knows reads its value its own way, which this check cannot
+        // follow; unknown types are read as raw bytes, by the byte count.
+        if (openvdb::Metadata::isRegisteredType(type)) {
+            corrupt("metadata '" + name.substr(0, 64) + "' has type '" + type.substr(0, 64) +
+                    "', which ivdb does not read");
+        }
     }
 
     /// io::DelayedLoadMetadata, which OpenVDB sizes by its entry count before reading anything
