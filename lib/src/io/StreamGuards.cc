@@ -15,6 +15,7 @@
 #include <dlfcn.h>
 
 #include <cstdint>
+#include <cstring>
 #include <istream>
 #include <string>
 
@@ -30,7 +31,7 @@ ReadFn original(const char* symbol)
 }
 
 /// Check the block's byte count (without consuming it), then let OpenVDB read the block.
-void guardedRead(std::istream& is, char* data, size_t numBytes, ReadFn read)
+void guardedRead(std::istream& is, char* data, size_t numBytes, ReadFn read, bool blosc)
 {
     const std::istream::pos_type start = is.tellg();
     std::int64_t count = 0;
@@ -41,6 +42,21 @@ void guardedRead(std::istream& is, char* data, size_t numBytes, ReadFn read)
     if (count > 0 && std::uint64_t(count) > numBytes + numBytes / 100 + 1024) {
         OPENVDB_THROW(openvdb::IoError, "a compressed block claims " + std::to_string(count) +
             " bytes for " + std::to_string(numBytes) + " bytes of values (the file is damaged)");
+    }
+    if (count > 0 && blosc) {
+        // c-blosc 1 takes the block's sizes from its 16-byte header, not from the caller: a header
+        // that claims more compressed bytes than the block holds makes it read past the block
+        // (found by fuzz_vdb: a heap overflow in LZ4_decompress_safe).
+        unsigned char header[16];
+        is.read(reinterpret_cast<char*>(header), sizeof(header));
+        std::uint32_t raw = 0, stored = 0;
+        std::memcpy(&raw, header + 4, 4);
+        std::memcpy(&stored, header + 12, 4);
+        if (!is || std::uint64_t(stored) != std::uint64_t(count) || raw != numBytes) {
+            OPENVDB_THROW(openvdb::IoError, "a compressed block's header does not match the "
+                "block (" + std::to_string(count) + " bytes for " + std::to_string(numBytes) +
+                " bytes of values)");
+        }
     }
     if (count <= 0) {
         const std::uint64_t raw = std::uint64_t(-(count + 1)) + 1; // no overflow at INT64_MIN
@@ -63,13 +79,13 @@ namespace io {
 void bloscFromStream(std::istream& is, char* data, size_t numBytes)
 {
     static const ReadFn read = original("_ZN7openvdb5v10_02io15bloscFromStreamERSiPcm");
-    guardedRead(is, data, numBytes, read);
+    guardedRead(is, data, numBytes, read, /*blosc=*/true);
 }
 
 void unzipFromStream(std::istream& is, char* data, size_t numBytes)
 {
     static const ReadFn read = original("_ZN7openvdb5v10_02io15unzipFromStreamERSiPcm");
-    guardedRead(is, data, numBytes, read);
+    guardedRead(is, data, numBytes, read, /*blosc=*/false);
 }
 
 } // namespace io
