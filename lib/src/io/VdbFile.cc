@@ -5,6 +5,7 @@
 #include <openvdb/Metadata.h>
 #include <openvdb/io/Archive.h>
 #include <openvdb/io/Compression.h>
+#include <openvdb/io/DelayedLoadMetadata.h>
 #include <openvdb/io/File.h>
 
 #include <algorithm>
@@ -143,6 +144,7 @@ public:
             if (bytes > end - mPos) corrupt("a metadata value claims more bytes than the file holds");
             const std::uint64_t valueEnd = mPos + bytes;
             if (type == "__delayedload" && bytes > 0) {
+                mDelayedLoadAt = mPos - 4;
                 delayed = delayedLoad(valueEnd);
             } else if (type != "string") {
                 fixedSizeValue(name, type, bytes, valueEnd);
@@ -241,6 +243,20 @@ public:
         }
     }
 
+    /// Where the last delayed-load table read by metaMap() starts (its byte count).
+    std::uint64_t delayedLoadAt() const { return mDelayedLoadAt; }
+
+    /// Let OpenVDB read from @a pos (bytes this reader has checked), then come back to pos().
+    template<typename ReadFn>
+    void readWithOpenVdb(std::uint64_t pos, ReadFn&& read)
+    {
+        mIn.clear();
+        mIn.seekg(std::streamoff(pos));
+        read(static_cast<std::istream&>(mIn));
+        if (!mIn) corrupt("it cannot be read to the end (truncated?)");
+        seek(mPos);
+    }
+
     [[noreturn]] void corrupt(const std::string& why) const
     {
         ioError(mPath, "not a valid .vdb file: " + why);
@@ -248,7 +264,7 @@ public:
 
 private:
     std::string mPath;
-    std::uint64_t mSize, mPos = 0;
+    std::uint64_t mSize, mPos = 0, mDelayedLoadAt = 0;
     std::ifstream mIn;
 };
 
@@ -324,7 +340,12 @@ public:
         const std::uint64_t count = std::uint64_t(1) << (3 * mLayout.nodeLog2[level]);
         const std::uint64_t maskBytes = count / 8;
         if (level + 1 == mLayout.nodeLog2.size()) {
-            mIn.skip(maskBytes, mEnd); // a leaf's topology is its value mask
+            // A leaf's topology is its value mask; its active count sizes its values later.
+            std::vector<std::uint64_t> mask(count / 64);
+            mIn.bytes(mask.data(), maskBytes, mEnd);
+            std::uint64_t active = 0;
+            for (std::uint64_t word: mask) active += std::uint64_t(__builtin_popcountll(word));
+            mLeafActive.push_back(std::uint16_t(active));
             ++mLeaves;
             return;
         }
@@ -363,11 +384,51 @@ public:
         }
     }
 
+    /// The leaves' voxel data in a file with grid offsets, as OpenVDB passes over it when it
+    /// opens the file with delayed loading (LeafNode::readBuffers, seeking): the value masks
+    /// are the topology's; with a delayed-load @a table, each leaf's value-compression case
+    /// and block size are the table's, and must match the file's own, which OpenVDB reads when
+    /// the leaf is first touched.
+    void seekableLeafBuffers(const openvdb::io::DelayedLoadMetadata* table)
+    {
+        namespace vio = openvdb::io;
+        const std::uint64_t count = std::uint64_t(1) << (3 * mLayout.nodeLog2.back());
+        const bool maskCompressed = (mCompression & vio::COMPRESS_ACTIVE_MASK) != 0;
+        for (std::uint64_t i = 0; i < mLeaves; ++i) {
+            mIn.skip(count / 8, mEnd); // value mask: the topology's is used
+            Expect expect;
+            if (!maskCompressed) {
+                expect.how = vio::NO_MASK_AND_ALL_VALS; // OpenVDB skips the byte and assumes this
+            } else if (table) {
+                expect.how = table->getMask(i);
+            }
+            if (table && (mCompression & (vio::COMPRESS_BLOSC | vio::COMPRESS_ZIP))) {
+                expect.blockBytes = table->getCompressedSize(i);
+            }
+            values(count, mLeafActive[i], count / 8, &expect);
+        }
+    }
+
     std::uint64_t leaves() const { return mLeaves; }
 
+    /// Hand the leaves found to a walker of the voxel data (bounded by the grid's end).
+    void moveLeavesTo(TopologyWalker& other)
+    {
+        other.mLeaves = mLeaves;
+        other.mLeafActive = std::move(mLeafActive);
+    }
+
 private:
+    /// What OpenVDB's delayed-load pass takes from elsewhere than the value block itself.
+    struct Expect
+    {
+        int how = -1;                // the value-compression case
+        std::int64_t blockBytes = -1; // the compressed block's size, count included
+    };
+
     /// A node's values, as io::readCompressedValues reads them.
-    void values(std::uint64_t count, std::uint64_t activeCount, std::uint64_t maskBytes)
+    void values(std::uint64_t count, std::uint64_t activeCount, std::uint64_t maskBytes,
+                const Expect* expect = nullptr)
     {
         namespace vio = openvdb::io;
         unsigned char how = 0; // which of the value-compression cases follows
@@ -375,6 +436,11 @@ private:
         if (how > vio::NO_MASK_AND_ALL_VALS) {
             mIn.corrupt(mWhere + "has a node whose values are stored in an unknown way (" +
                         std::to_string(int(how)) + ")");
+        }
+        if (expect && expect->how >= 0 && expect->how != how) {
+            mIn.corrupt(mWhere + "has a leaf whose values are stored in one way (" +
+                        std::to_string(int(how)) + ") where its delayed-load table says another (" +
+                        std::to_string(expect->how) + ")");
         }
         if (how == vio::NO_MASK_AND_ONE_INACTIVE_VAL || how == vio::MASK_AND_ONE_INACTIVE_VAL) {
             mIn.skip(mLayout.valueBytes, mEnd);
@@ -397,6 +463,15 @@ private:
             return;
         }
         const std::int64_t block = mIn.i64(mEnd); // compressed bytes, or minus the raw bytes
+        if (expect && expect->blockBytes >= 0) {
+            const std::uint64_t actual = 8 + (block <= 0 ? std::uint64_t(-(block + 1)) + 1
+                                                         : std::uint64_t(block));
+            if (actual != std::uint64_t(expect->blockBytes)) {
+                mIn.corrupt(mWhere + "has a leaf of " + std::to_string(actual) + " compressed "
+                            "bytes where its delayed-load table says " +
+                            std::to_string(expect->blockBytes));
+            }
+        }
         if (block <= 0) {
             const std::uint64_t raw = std::uint64_t(-(block + 1)) + 1;
             if (raw != bytes) {
@@ -419,13 +494,15 @@ private:
     std::uint64_t mEnd;
     std::string mWhere;
     std::uint64_t mLeaves = 0;
+    std::vector<std::uint16_t> mLeafActive; // active voxels per leaf, in file order
 };
 
 /// The root node's tile records, which OpenVDB reads without checking: a tile's "active" flag
 /// is read straight into a bool (undefined behaviour for a byte other than 0 or 1), and a
 /// damaged tile count makes it read past its bytes.
 std::int64_t checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
-                       std::uint64_t end, const std::string& grid, bool buffers)
+                       std::uint64_t end, const std::string& grid, bool buffers,
+                       std::uint64_t gridEnd, std::int64_t delayed)
 {
     const std::string where = "grid '" + grid.substr(0, 64) + "' ";
     in.skip(4, end); // buffer count
@@ -462,8 +539,26 @@ std::int64_t checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t
         }
         walker.node(0);
     }
-    if (buffers) walker.leafBuffers();
-    return std::int64_t(walker.leaves());
+    if (buffers) {
+        walker.leafBuffers();
+        return std::int64_t(walker.leaves());
+    }
+    // The voxel data follows the topology, up to the grid's end.
+    const std::int64_t leaves = std::int64_t(walker.leaves());
+    if (delayed >= 0 && leaves != delayed) {
+        in.corrupt(where + "has " + std::to_string(leaves) + " leaves but a delayed-load table "
+                   "of " + std::to_string(delayed));
+    }
+    openvdb::io::DelayedLoadMetadata table;
+    if (delayed >= 0) {
+        const std::uint64_t at = in.delayedLoadAt();
+        in.readWithOpenVdb(at, [&table](std::istream& is) { table.read(is); });
+    }
+    // OpenVDB reads on from where the topology ended.
+    TopologyWalker data(in, layout, compression, gridEnd, where);
+    walker.moveLeavesTo(data);
+    data.seekableLeafBuffers(delayed >= 0 ? &table : nullptr);
+    return leaves;
 }
 
 struct GridRecord
@@ -495,7 +590,8 @@ void checkGrid(LayoutReader& in, const GridRecord& d, std::uint64_t end, bool bu
                    " leaves, more than its bytes can hold");
     }
     if (layout.valueBytes == 0) return;
-    const std::int64_t leaves = checkTree(in, layout, compression, end, d.name, buffers);
+    const std::int64_t leaves =
+        checkTree(in, layout, compression, end, d.name, buffers, std::uint64_t(d.end), delayed);
     if (leaves >= 0 && delayed >= 0 && leaves != delayed) {
         in.corrupt(where + "has " + std::to_string(leaves) + " leaves but a delayed-load table "
                    "of " + std::to_string(delayed));
