@@ -5,8 +5,8 @@
 #   2. each libFuzzer target for FUZZ_SECONDS (default 60) from the seed corpus in tests/fuzz/;
 #   3. on request (SANITIZE_STAGES="... tsan"), the TBB code (rasterizer, differential operators,
 #      grid CSG and blends) under ThreadSanitizer (build-tsan/). Debian's libtbb is not
-#      instrumented; tests/tsan/TbbTsanBridge.cc shows TSan its synchronization, with no
-#      suppressions.
+#      instrumented; tests/tsan/TbbTsanBridge.cc shows TSan its synchronization.
+#      tests/tsan.supp holds one real race, in OpenVDB.
 # Any sanitizer report, fuzz crash or failing test fails the script. Stages: SANITIZE_STAGES
 # (default "asan fuzz"). The fuzzers start from a fixed seed, so a shorter run (a slower
 # machine) replays a prefix of a longer one.
@@ -14,7 +14,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
 
-stages=${SANITIZE_STAGES:-asan fuzz}
+stages=${SANITIZE_STAGES:-asan fuzz tsan}
 fuzz_seconds=${FUZZ_SECONDS:-60}
 # FUZZ_STRICT=0 reports a fuzz failure (and keeps its input) without failing the script.
 fuzz_strict=${FUZZ_STRICT:-1}
@@ -24,7 +24,7 @@ export CCACHE_NOHASHDIR=1 CCACHE_BASEDIR="$PWD"
 flags="-O1 -gline-tables-only -DNDEBUG"
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:check_initialization_order=1:strict_init_order=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
-export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1"
+export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/tests/tsan.supp"
 
 configure() { # DIR SANITIZERS [extra cmake args]
   local dir=$1 san=$2
@@ -79,9 +79,23 @@ fi
 if [[ " $stages " == *" tsan "* ]]; then
   configure build-tsan thread
   echo "sanitize: building the threaded suites with TSan (build-tsan/)" >&2
-  cmake --build build-tsan -j2 --target test_raster test_diff test_ops ivdb_tbb_tsan >/dev/null
-  echo "sanitize: threaded suites under TSan" >&2
+  cmake --build build-tsan -j2 --target test_raster test_diff test_ops ivdb_tbb_tsan \
+    tsan_race_canary >/dev/null
   bridge=$PWD/build-tsan/tests/libivdb_tbb_tsan.so
+  # The bridge must not hide real races: a deliberate one in TBB bodies has to be reported.
+  if LD_PRELOAD=$bridge INTEL_LIBITTNOTIFY64=$bridge INTEL_ITTNOTIFY_GROUPS=sync \
+     TSAN_OPTIONS="$TSAN_OPTIONS halt_on_error=0 exitcode=66" \
+     build-tsan/tests/tsan_race_canary >build-tsan/race_canary.log 2>&1; then
+    echo "sanitize: TSan missed the deliberate race in tests/tsan/RaceCanary.cc" >&2
+    exit 1
+  fi
+  grep -q "racyBody" build-tsan/race_canary.log || {
+    echo "sanitize: the race canary failed without a TSan report on racyBody:" >&2
+    tail -20 build-tsan/race_canary.log >&2
+    exit 1
+  }
+  echo "sanitize: TSan reports the deliberate race ($(grep -c 'WARNING: ThreadSanitizer' \
+    build-tsan/race_canary.log) warnings); threaded suites under TSan" >&2
   # TSan runs 5-15x slower: the long analytic blend sweep is left to the other builds.
   for t in test_raster test_diff test_ops; do
     LD_PRELOAD=$bridge INTEL_LIBITTNOTIFY64=$bridge INTEL_ITTNOTIFY_GROUPS=sync \

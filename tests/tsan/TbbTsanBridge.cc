@@ -20,6 +20,11 @@
 //    inside libtbb; release on free and acquire on allocate model that hand-over, so the next
 //    task's constructor does not "race" with the previous owner.
 //
+// 3. Also an LD_PRELOAD shim over r1::execute_and_wait and r1::wait: the last finishing task
+//    ends a wait by an atomic decrement of the wait_context's count, after its ITT release, and
+//    the waiting thread sees the zero inside libtbb. Acquiring the count's address when the wait
+//    returns pairs with that decrement, so the waiter may reuse the wait_context's stack memory.
+//
 // Every edge added is synchronization TBB really performs, so no real race is hidden.
 #include <dlfcn.h>
 
@@ -122,4 +127,40 @@ _ZN3tbb6detail2r110deallocateERNS0_2d117small_object_poolEPvmRKNS2_14execution_d
         "_ZN3tbb6detail2r110deallocateERNS0_2d117small_object_poolEPvmRKNS2_14execution_dataE");
     release(p);
     fn(pool, p, n, ed);
+}
+
+// The waits (d1::wait_context: an 8-byte version word, then the std::atomic<uint64_t> count):
+//   void r1::execute_and_wait(d1::task&, d1::task_group_context&, d1::wait_context&,
+//                             d1::task_group_context&)
+//   void r1::wait(d1::wait_context&, d1::task_group_context&)
+namespace {
+
+void acquireWaitContext(void* wait)
+{
+    acquire(wait);
+    acquire(static_cast<char*>(wait) + 8);
+}
+
+} // namespace
+
+IVDB_EXPORT void
+_ZN3tbb6detail2r116execute_and_waitERNS0_2d14taskERNS2_18task_group_contextERNS2_12wait_contextES6_(
+    void* task, void* taskContext, void* wait, void* waitContext)
+{
+    using Fn = void (*)(void*, void*, void*, void*);
+    static const Fn fn = next<Fn>(
+        "_ZN3tbb6detail2r116execute_and_waitERNS0_2d14taskERNS2_18task_group_contextERNS2_12wait_"
+        "contextES6_");
+    fn(task, taskContext, wait, waitContext);
+    acquireWaitContext(wait);
+}
+
+IVDB_EXPORT void _ZN3tbb6detail2r14waitERNS0_2d112wait_contextERNS2_18task_group_contextE(
+    void* wait, void* context)
+{
+    using Fn = void (*)(void*, void*);
+    static const Fn fn =
+        next<Fn>("_ZN3tbb6detail2r14waitERNS0_2d112wait_contextERNS2_18task_group_contextE");
+    fn(wait, context);
+    acquireWaitContext(wait);
 }
