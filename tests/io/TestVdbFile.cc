@@ -446,7 +446,7 @@ TEST_F(TestVdbFile, ReadRefusesDamagedTransformAndRootRecords)
     expectReadFails(damaged("map", map, "UniformScaleMaq"), "unknown map", "unknown type");
 }
 
-TEST_F(TestVdbFile, ReadsStreamsAndSharedTreesAndRefusesOtherFormats)
+TEST_F(TestVdbFile, ReadsStreamsSharedTreesAndEmptyGridsAndRefusesOtherFormats)
 {
     auto sphere = makeSphere(1.0f, 0.1f);
     auto shared = sphere->copyGrid(); // shares the tree: written as an instance
@@ -455,7 +455,10 @@ TEST_F(TestVdbFile, ReadsStreamsAndSharedTreesAndRefusesOtherFormats)
     vectors->setName("vectors");
     vectors->fill(openvdb::CoordBBox(openvdb::Coord(-20), openvdb::Coord(20)),
                   openvdb::Vec3s(1.0f, 2.0f, 3.0f));
-    const openvdb::GridCPtrVec grids = {sphere, shared, vectors};
+    // A grid without leaves: OpenVDB writes its delayed-load table with 0 bytes.
+    auto empty = openvdb::FloatGrid::create(0.5f);
+    empty->setName("empty");
+    const openvdb::GridCPtrVec grids = {sphere, shared, vectors, empty};
 
     // io::File's layout (with grid offsets), through ivdb's writer
     const std::string file = path("file.vdb");
@@ -469,11 +472,20 @@ TEST_F(TestVdbFile, ReadsStreamsAndSharedTreesAndRefusesOtherFormats)
     for (const std::string& p : {file, stream}) {
         SCOPED_TRACE(p);
         const auto read = ivdb::io::readVdb(p);
-        ASSERT_EQ(read.size(), 3u);
-        auto a = openvdb::gridPtrCast<openvdb::FloatGrid>(read[0]);
-        auto b = openvdb::gridPtrCast<openvdb::FloatGrid>(read[1]);
-        auto v = openvdb::gridPtrCast<openvdb::Vec3SGrid>(read[2]);
-        ASSERT_TRUE(a && b && v);
+        ASSERT_EQ(read.size(), 4u);
+        const auto named = [&read](const std::string& name) {
+            for (const auto& g : read) {
+                if (g->getName() == name) return g;
+            }
+            return openvdb::GridBase::Ptr();
+        };
+        auto a = openvdb::gridPtrCast<openvdb::FloatGrid>(named("surface"));
+        auto b = openvdb::gridPtrCast<openvdb::FloatGrid>(named("shared"));
+        auto v = openvdb::gridPtrCast<openvdb::Vec3SGrid>(named("vectors"));
+        auto e = openvdb::gridPtrCast<openvdb::FloatGrid>(named("empty"));
+        ASSERT_TRUE(a && b && v && e);
+        EXPECT_EQ(e->activeVoxelCount(), 0u);
+        EXPECT_EQ(e->background(), 0.5f);
         EXPECT_EQ(a->activeVoxelCount(), sphere->activeVoxelCount());
         EXPECT_EQ(b->activeVoxelCount(), sphere->activeVoxelCount());
         EXPECT_EQ(v->activeVoxelCount(), vectors->activeVoxelCount());

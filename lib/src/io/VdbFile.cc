@@ -143,9 +143,10 @@ public:
             const std::uint32_t bytes = u32(end);
             if (bytes > end - mPos) corrupt("a metadata value claims more bytes than the file holds");
             const std::uint64_t valueEnd = mPos + bytes;
-            if (type == "__delayedload" && bytes > 0) {
+            if (type == "__delayedload") {
+                // An empty table (0 bytes) is what OpenVDB writes for a grid without leaves.
                 mDelayedLoadAt = mPos - 4;
-                delayed = delayedLoad(valueEnd);
+                delayed = bytes > 0 ? delayedLoad(valueEnd) : 0;
             } else if (type != "string") {
                 fixedSizeValue(name, type, bytes, valueEnd);
             }
@@ -323,6 +324,14 @@ TreeLayout treeLayout(const std::string& gridType)
     return layout;
 }
 
+/// Bits set in a node mask read as 64-bit words.
+std::uint64_t countOn(const std::vector<std::uint64_t>& words)
+{
+    std::uint64_t n = 0;
+    for (std::uint64_t word: words) n += std::uint64_t(__builtin_popcountll(word));
+    return n;
+}
+
 /// Walks a tree's topology as OpenVDB 10 reads it (InternalNode::readTopology,
 /// io::readCompressedValues, LeafNode::readTopology), with every count checked against the
 /// bytes before the grid's voxel data. OpenVDB reads on past the end of a damaged topology and
@@ -343,20 +352,14 @@ public:
             // A leaf's topology is its value mask; its active count sizes its values later.
             std::vector<std::uint64_t> mask(count / 64);
             mIn.bytes(mask.data(), maskBytes, mEnd);
-            std::uint64_t active = 0;
-            for (std::uint64_t word: mask) active += std::uint64_t(__builtin_popcountll(word));
-            mLeafActive.push_back(std::uint16_t(active));
+            mLeafActive.push_back(std::uint16_t(countOn(mask)));
             ++mLeaves;
             return;
         }
         std::vector<std::uint64_t> children(count / 64), active(count / 64);
         mIn.bytes(children.data(), maskBytes, mEnd);
         mIn.bytes(active.data(), maskBytes, mEnd);
-        std::uint64_t childCount = 0, activeCount = 0;
-        for (std::size_t w = 0; w < children.size(); ++w) {
-            childCount += std::uint64_t(__builtin_popcountll(children[w]));
-            activeCount += std::uint64_t(__builtin_popcountll(active[w]));
-        }
+        const std::uint64_t childCount = countOn(children), activeCount = countOn(active);
         // Each child needs at least its own masks: refuse a count the bytes cannot hold before
         // descending (which would also be OpenVDB's allocation).
         const std::uint64_t childMaskBytes = (std::uint64_t(1) << (3 * mLayout.nodeLog2[level + 1])) / 8;
@@ -378,9 +381,7 @@ public:
         std::vector<std::uint64_t> mask(count / 64);
         for (std::uint64_t i = 0; i < mLeaves; ++i) {
             mIn.bytes(mask.data(), count / 8, mEnd);
-            std::uint64_t active = 0;
-            for (std::uint64_t word: mask) active += std::uint64_t(__builtin_popcountll(word));
-            values(count, active, count / 8);
+            values(count, countOn(mask), count / 8);
         }
     }
 
@@ -411,12 +412,8 @@ public:
 
     std::uint64_t leaves() const { return mLeaves; }
 
-    /// Hand the leaves found to a walker of the voxel data (bounded by the grid's end).
-    void moveLeavesTo(TopologyWalker& other)
-    {
-        other.mLeaves = mLeaves;
-        other.mLeafActive = std::move(mLeafActive);
-    }
+    /// Where reading must stop from now on: the voxel data runs to the grid's end.
+    void bound(std::uint64_t end) { mEnd = end; }
 
 private:
     /// What OpenVDB's delayed-load pass takes from elsewhere than the value block itself.
@@ -497,10 +494,12 @@ private:
     std::vector<std::uint16_t> mLeafActive; // active voxels per leaf, in file order
 };
 
-/// The root node's tile records, which OpenVDB reads without checking: a tile's "active" flag
-/// is read straight into a bool (undefined behaviour for a byte other than 0 or 1), and a
-/// damaged tile count makes it read past its bytes.
-std::int64_t checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
+/// A grid's tree, from its root node on. OpenVDB reads the root's tile records without checking:
+/// a tile's "active" flag goes straight into a bool (undefined behaviour for a byte other than 0
+/// or 1), and a damaged tile count makes it read past its bytes. For the trees TreeLayout walks
+/// (nodeLog2), then the whole topology and the voxel data (to @a gridEnd), with the leaf count
+/// checked against the delayed-load table's (@a delayed, -1 without one).
+void checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
                        std::uint64_t end, const std::string& grid, bool buffers,
                        std::uint64_t gridEnd, std::int64_t delayed)
 {
@@ -528,7 +527,7 @@ std::int64_t checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t
                        " of " + std::to_string(tiles) + ")");
         }
     }
-    if (layout.nodeLog2.empty()) return -1;
+    if (layout.nodeLog2.empty()) return;
     TopologyWalker walker(in, layout, compression, end, where);
     for (std::uint32_t i = 0; i < children; ++i) {
         std::int32_t origin[3];
@@ -539,26 +538,23 @@ std::int64_t checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t
         }
         walker.node(0);
     }
-    if (buffers) {
-        walker.leafBuffers();
-        return std::int64_t(walker.leaves());
-    }
-    // The voxel data follows the topology, up to the grid's end.
     const std::int64_t leaves = std::int64_t(walker.leaves());
     if (delayed >= 0 && leaves != delayed) {
         in.corrupt(where + "has " + std::to_string(leaves) + " leaves but a delayed-load table "
                    "of " + std::to_string(delayed));
+    }
+    // The voxel data: OpenVDB reads on from where the topology ended.
+    if (buffers) {
+        walker.leafBuffers();
+        return;
     }
     openvdb::io::DelayedLoadMetadata table;
     if (delayed >= 0) {
         const std::uint64_t at = in.delayedLoadAt();
         in.readWithOpenVdb(at, [&table](std::istream& is) { table.read(is); });
     }
-    // OpenVDB reads on from where the topology ended.
-    TopologyWalker data(in, layout, compression, gridEnd, where);
-    walker.moveLeavesTo(data);
-    data.seekableLeafBuffers(delayed >= 0 ? &table : nullptr);
-    return leaves;
+    walker.bound(gridEnd);
+    walker.seekableLeafBuffers(delayed >= 0 ? &table : nullptr);
 }
 
 struct GridRecord
@@ -590,16 +586,11 @@ void checkGrid(LayoutReader& in, const GridRecord& d, std::uint64_t end, bool bu
                    " leaves, more than its bytes can hold");
     }
     if (layout.valueBytes == 0) return;
-    const std::int64_t leaves =
-        checkTree(in, layout, compression, end, d.name, buffers, std::uint64_t(d.end), delayed);
-    if (leaves >= 0 && delayed >= 0 && leaves != delayed) {
-        in.corrupt(where + "has " + std::to_string(leaves) + " leaves but a delayed-load table "
-                   "of " + std::to_string(delayed));
-    }
+    checkTree(in, layout, compression, end, d.name, buffers, std::uint64_t(d.end), delayed);
 }
 
 /// Check the header, the file metadata, every grid descriptor's offsets, and every grid's
-/// metadata, transform and root node.
+/// metadata, transform and tree (see checkGrid).
 void validateLayout(const std::string& path)
 {
     std::error_code ec;
