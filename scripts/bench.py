@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: Apache-2.0
 """Performance figures for the README: run after scripts/build.sh.
 
 Section "core" (rasterizing):

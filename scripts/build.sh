@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Configure (once) and build ivdb in Release into build/, with ccache, on two jobs.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Install the Debian 12 packages ivdb needs, only those that are missing (idempotent, quick).
 set -euo pipefail
 

@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # README command 1: install what is missing, build in Release, and run the main job:
 # rasterize every scene in data/ into out/NAME.vdb (one summary line per scene), then the grid
-# pipelines: the seed's figure 1 trio as grid CSG of two rasterized spheres, a grid blend, and
-# the gradient and mean curvature of figure 4's difference of two spheres; meshes of the figure 4
-# difference coloured by its mean curvature (HSV over [-50, 50]) and of the figure 5 blend,
-# gradient arrows on a sphere (figure 3), a Blender-ready --fog copy of the figure 5 blend, and
-# the gallery: the five figures rendered into out/*.png.
+# pipelines: the union, intersection and difference of two rasterized spheres as grid CSG, a
+# grid blend, and the gradient and mean curvature of the difference of two spheres (data/fig1_difference);
+# meshes of that difference coloured by its mean curvature (HSV over [-50, 50]) and of the
+# blended union (data/fig5_blend_union), gradient arrows on a sphere, a Blender-ready --fog copy of the
+# blended union, and the gallery (docs/gallery.md): the figures rendered into out/*.png.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -29,7 +30,7 @@ done
 "$ivdb" rasterize data/fig5_blend_union.json -o out/fig5_blend_union_fog.vdb --fog -q
 "$ivdb" gradient out/sphere.vdb -o out/sphere_gradient.vdb --with-input -q
 "$ivdb" glyphs out/sphere_gradient.vdb -o out/fig3_sphere_arrows.ply --stride 8
-# The gallery: the seed's five figures as images (README, docs/ holds 320x240 copies).
+# The gallery: the gallery's figures as images (README, docs/ holds 320x240 copies).
 for f in fig1_union fig1_intersection fig1_difference fig2_plane fig2_cylinder fig2_ellipsoid \
          fig2_cone fig2_paraboloid fig2_hyperboloid fig5_blend_union; do
   "$ivdb" render "out/$f.vdb" -o "out/$f.png" -q

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Sanitizer and fuzz checks (CI runs this after scripts/test.sh):
 #   1. the test suite under AddressSanitizer + UndefinedBehaviorSanitizer (clang, build-asan/),
 #      the same build instrumented for libFuzzer;
@@ -43,8 +44,9 @@ fi
 
 if [[ " $stages " == *" asan "* ]]; then
   echo "sanitize: test suite under ASan + UBSan" >&2
-  # The interop suites check file formats with outside programs; the plain build runs them.
-  (cd build-asan && ctest --output-on-failure --no-tests=error -j2 -LE interop)
+  # The interop suites check file formats with outside programs, and the install test builds
+  # docs/library.md against an installed package: the plain build runs both.
+  (cd build-asan && ctest --output-on-failure --no-tests=error -j2 -LE "interop|install")
 fi
 
 if [[ " $stages " == *" fuzz "* ]]; then

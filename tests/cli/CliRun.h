@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Running the ivdb binary from CLI tests: exit code, stdout and stderr of one run.
 #pragma once
 
@@ -40,16 +41,28 @@ inline std::string slurpFile(const std::filesystem::path& p)
     return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
+/// @a s as one single-quoted shell word.
+inline std::string shellQuote(const std::string& s)
+{
+    std::string q = "'";
+    for (char c : s) {
+        if (c == '\'') q += "'\\''";
+        else q += c;
+    }
+    return q + "'";
+}
+
 /// Run `ivdb ARGS` in @a dir (killed after @a timeoutSeconds), with stdin from /dev/null;
-/// @a shellPrefix runs first in the same shell (e.g. "ulimit -f 4 && ").
+/// @a shellPrefix runs first in the same shell (e.g. "ulimit -f 4 && ", or kAddressCap).
+/// stdout and stderr go to hidden files in @a dir, removed after the run.
 inline CliResult runIvdb(const std::filesystem::path& dir, const std::vector<std::string>& args,
                          int timeoutSeconds = 120, const std::string& shellPrefix = "")
 {
-    std::string cmd = "cd '" + dir.string() + "' && " + shellPrefix + "exec timeout -s KILL " +
-                      std::to_string(timeoutSeconds * kSlowdown) + " '" + std::string(IVDB_BINARY) + "'";
-    for (const auto& a : args) cmd += " '" + a + "'";
+    std::string cmd = "cd " + shellQuote(dir.string()) + " && " + shellPrefix + "exec timeout -s KILL " +
+                      std::to_string(timeoutSeconds * kSlowdown) + " " + shellQuote(IVDB_BINARY);
+    for (const auto& a : args) cmd += " " + shellQuote(a);
     const std::filesystem::path out = dir / ".stdout.txt", err = dir / ".stderr.txt";
-    cmd += " >'" + out.string() + "' 2>'" + err.string() + "' </dev/null";
+    cmd += " >" + shellQuote(out.string()) + " 2>" + shellQuote(err.string()) + " </dev/null";
     const int status = std::system(cmd.c_str());
     CliResult r;
     // timeout(1) exits 128 + 9 when it had to kill the run; a signal inside ivdb also shows >= 128.

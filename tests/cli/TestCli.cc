@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // End-to-end runs of the ivdb binary: exit codes, stdout and stderr text, and the files left
 // behind (none on failure; an existing output untouched).
 #include "CliRun.h"
@@ -26,22 +27,7 @@
 namespace {
 
 namespace fs = std::filesystem;
-
-struct RunResult
-{
-    int exitCode = -1;
-    std::string out, err;
-};
-
-std::string quote(const std::string& s)
-{
-    std::string q = "'";
-    for (char c : s) {
-        if (c == '\'') q += "'\\''";
-        else q += c;
-    }
-    return q + "'";
-}
+using RunResult = ivdb::test::CliResult;
 
 class TestCli: public ::testing::Test
 {
@@ -62,34 +48,15 @@ protected:
         fs::remove_all(mDir, ec);
     }
 
-    /// Run `ivdb ARGS` with the working folder mDir/run, capturing stdout and stderr in files
-    /// outside that folder (so listings of it show only what ivdb made).
+    /// Run `ivdb ARGS` in mDir/run (60 s and a 3 GB address-space cap, so a runaway run fails
+    /// instead of hanging); listings of that folder show only what ivdb made.
     RunResult run(const std::vector<std::string>& args) const
     {
-        const fs::path outFile = mDir / "stdout.txt", errFile = mDir / "stderr.txt";
-        // bounded: 60 s and 3 GB of address space, so a runaway run fails instead of hanging
-        std::string cmd = "cd " + quote((mDir / "run").string()) +
-                          " && " + std::string(ivdb::test::kAddressCap) + "exec timeout -s KILL " +
-                          std::to_string(60 * ivdb::test::kSlowdown) + " " + quote(IVDB_BINARY);
-        for (const auto& a : args) cmd += " " + quote(a);
-        cmd += " >" + quote(outFile.string()) + " 2>" + quote(errFile.string()) + " </dev/null";
-        const int status = std::system(cmd.c_str());
-        RunResult r;
-        if (status != -1 && WIFEXITED(status)) r.exitCode = WEXITSTATUS(status);
-        else r.exitCode = 1000 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
-        r.out = readText(outFile);
-        r.err = readText(errFile);
-        return r;
+        return ivdb::test::runIvdb(mDir / "run", args, 60, ivdb::test::kAddressCap);
     }
 
     /// A path inside the working folder of the runs.
     std::string path(const std::string& name) const { return (mDir / "run" / name).string(); }
-
-    static std::string readText(const fs::path& p)
-    {
-        std::ifstream in(p, std::ios::binary);
-        return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-    }
 
     void writeText(const std::string& name, const std::string& text) const
     {
@@ -158,7 +125,7 @@ protected:
             const std::set<std::string> before = listing();
             const RunResult r = run(args);
             expectError(r, mentions, what);
-            EXPECT_EQ(readText(out), old) << what << ": the existing output changed";
+            EXPECT_EQ(ivdb::test::slurpFile(out), old) << what << ": the existing output changed";
             EXPECT_EQ(listing(), before) << what << ": files were created or removed";
             fs::remove(out);
         }
@@ -378,7 +345,7 @@ TEST_F(TestCli, InfoBadFiles)
     EXPECT_EQ(r.err.find("IoError"), std::string::npos) << r.err;
 
     ASSERT_EQ(rasterize(data("sphere.json"), "good.vdb", {"--voxel-size", "0.05"}).exitCode, 0);
-    const std::string bytes = readText(path("good.vdb"));
+    const std::string bytes = ivdb::test::slurpFile(path("good.vdb"));
     ASSERT_GT(bytes.size(), 1000u);
     // 20: in the header; 200: in the grid metadata, where OpenVDB reads garbage lengths
     for (std::size_t n : {std::size_t(20), std::size_t(200), bytes.size() / 2, bytes.size() - 1}) {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // ivdb bench end to end: the CSV (checked against the dense path and OpenVDB's route, which it
 // measures side by side), the plot, skipped runs, and bad arguments.
 #include "CliRun.h"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // End-to-end runs of ivdb gradient, curvature and compare-gradient: the grids written (read back
 // with OpenVDB), their values next to the surface, --help, and the errors for bad input (non-zero
 // exit, `ivdb: error: ` message, no output file, an existing output untouched).
@@ -29,22 +30,7 @@
 namespace {
 
 namespace fs = std::filesystem;
-
-struct RunResult
-{
-    int exitCode = -1;
-    std::string out, err;
-};
-
-std::string quote(const std::string& s)
-{
-    std::string q = "'";
-    for (char c : s) {
-        if (c == '\'') q += "'\\''";
-        else q += c;
-    }
-    return q + "'";
-}
+using RunResult = ivdb::test::CliResult;
 
 class TestCliDiff: public ::testing::Test
 {
@@ -65,22 +51,11 @@ protected:
         fs::remove_all(mDir, ec);
     }
 
-    /// Run `ivdb ARGS` in mDir/run, capturing stdout and stderr outside that folder.
+    /// Run `ivdb ARGS` in mDir/run (60 s and a 3 GB address-space cap, so a runaway run fails
+    /// instead of hanging); listings of that folder show only what ivdb made.
     RunResult run(const std::vector<std::string>& args) const
     {
-        const fs::path outFile = mDir / "stdout.txt", errFile = mDir / "stderr.txt";
-        std::string cmd = "cd " + quote((mDir / "run").string()) +
-                          " && " + std::string(ivdb::test::kAddressCap) + "exec timeout -s KILL " +
-                          std::to_string(60 * ivdb::test::kSlowdown) + " " + quote(IVDB_BINARY);
-        for (const auto& a : args) cmd += " " + quote(a);
-        cmd += " >" + quote(outFile.string()) + " 2>" + quote(errFile.string()) + " </dev/null";
-        const int status = std::system(cmd.c_str());
-        RunResult r;
-        if (status != -1 && WIFEXITED(status)) r.exitCode = WEXITSTATUS(status);
-        else r.exitCode = 1000 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
-        r.out = readText(outFile);
-        r.err = readText(errFile);
-        return r;
+        return ivdb::test::runIvdb(mDir / "run", args, 60, ivdb::test::kAddressCap);
     }
 
     /// Run and expect success with nothing on stderr.
@@ -95,12 +70,6 @@ protected:
     }
 
     std::string path(const std::string& name) const { return (mDir / "run" / name).string(); }
-
-    static std::string readText(const fs::path& p)
-    {
-        std::ifstream in(p, std::ios::binary);
-        return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-    }
 
     std::set<std::string> listing() const
     {
@@ -156,7 +125,7 @@ protected:
             std::ofstream(out, std::ios::binary | std::ios::trunc) << old;
             const std::set<std::string> before = listing();
             expectError(run(args), mentions, what);
-            EXPECT_EQ(readText(out), old) << what << ": the existing output changed";
+            EXPECT_EQ(ivdb::test::slurpFile(out), old) << what << ": the existing output changed";
             EXPECT_EQ(listing(), before) << what << ": files were created or removed";
             fs::remove(out);
         }

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // ivdb mesh and --fog end to end: the files written (read back with OpenVDB), and bad arguments
 // (non-zero exit, `ivdb: error: `, no output).
 #include "CliRun.h"

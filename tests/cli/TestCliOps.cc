@@ -1,6 +1,9 @@
+// SPDX-License-Identifier: Apache-2.0
 // End-to-end runs of ivdb csg and ivdb blend: the level set written (read back with OpenVDB),
 // and the errors for bad input (non-zero exit, `ivdb: error: ` message, no output file, an
 // existing output untouched).
+#include "CliRun.h"
+
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -21,18 +24,7 @@
 namespace {
 
 namespace fs = std::filesystem;
-
-struct Result
-{
-    int exitCode = -1;
-    std::string err;
-};
-
-std::string slurp(const fs::path& p)
-{
-    std::ifstream in(p, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
+using Result = ivdb::test::CliResult;
 
 class TestCliOps: public ::testing::Test
 {
@@ -81,16 +73,7 @@ protected:
 
     Result run(const std::vector<std::string>& args) const
     {
-        std::string cmd = "cd '" + mDir.string() + "' && exec timeout -s KILL 120 '" +
-                          std::string(IVDB_BINARY) + "'";
-        for (const auto& a : args) cmd += " '" + a + "'";
-        cmd += " >/dev/null 2>'" + (mDir / "stderr.txt").string() + "' </dev/null";
-        const int status = std::system(cmd.c_str());
-        Result r;
-        r.exitCode = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : 1000;
-        r.err = slurp(mDir / "stderr.txt");
-        fs::remove(mDir / "stderr.txt");
-        return r;
+        return ivdb::test::runIvdb(mDir, args, 120);
     }
 
     openvdb::FloatGrid::Ptr readSurface(const std::string& name) const
@@ -116,7 +99,7 @@ protected:
             EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << r.err;
             EXPECT_NE(r.err.find(mention), std::string::npos) << "expected '" << mention << "' in: " << r.err;
             if (existing) {
-                EXPECT_EQ(slurp(out), "previous output") << mention;
+                EXPECT_EQ(ivdb::test::slurpFile(out), "previous output") << mention;
             } else {
                 EXPECT_FALSE(fs::exists(out)) << mention;
             }

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Robustness of every command against what an unattended pipeline meets: damaged .vdb files
 // (truncated, bytes flipped, empty, a folder, not a .vdb), values that are not finite, a full
 // disk, signals in the middle of a run, and extreme but valid settings. The rule each time: exit

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // libFuzzer target: a scene file's text through the parser, then the shape through every
 // evaluator (point, batch, gradient, interval, prune) and a coarse rasterization.
 //

@@ -1,13 +1,13 @@
-// libFuzzer target: bytes as a .vdb file through the CLI's reading path (the layout check,
+// SPDX-License-Identifier: Apache-2.0
+// libFuzzer target: bytes as a .vdb file through the jobs' reading path (the layout check,
 // OpenVDB's reader with delayed loading, grid selection, the level-set and value checks), then
 // `info`'s description of every grid and a gradient of a small level set.
 //
 // A bad file must end in an exception (the CLI prints it as `ivdb: error: FILE: ...`); a signal,
 // a sanitizer report or a hang is a bug.
-#include "Cli.h"
-
 #include <ivdb/diff/Differential.h>
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/jobs/Inputs.h>
 
 #include <openvdb/openvdb.h>
 
@@ -52,7 +52,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size)
     } catch (const std::exception&) {
     }
     try {
-        const openvdb::FloatGrid::Ptr phi = ivdb::cli::readLevelSet(gPath, "");
+        const openvdb::FloatGrid::Ptr phi = ivdb::jobs::readLevelSet(gPath);
         if (phi->activeVoxelCount() < 100000) (void)ivdb::diff::gradient(*phi, 1, false);
     } catch (const std::exception&) {
     }

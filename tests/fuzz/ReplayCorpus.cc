@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Replays fuzz inputs without libFuzzer: every file named on the command line, or every file in
 // a folder named there, goes through the target's LLVMFuzzerTestOneInput once. Built in every
 // configuration, so the seed corpus and each crash found stay regression tests. Like libFuzzer's

@@ -1,4 +1,5 @@
-// Blended CSG (seed eqs. 12-15): the node against its closed form and central differences, its
+// SPDX-License-Identifier: Apache-2.0
+// Blended CSG (docs/method.md#super-elliptic-blend): the node against its closed form and central differences, its
 // numerical safety for every p in [0.1, 1000] and huge child values, and the rasterized
 // scene-level blend of two spheres against the analytic blended surface.
 #include <ivdb/implicit/Blend.h>
@@ -41,7 +42,7 @@ const double kPs[] = {0.1, 1.0, 4.0, 50.0, 1000.0};
 
 Implicit::Ptr sphere(const Vec3d& c, double r) { return std::make_shared<implicit::Sphere>(c, r); }
 
-/// The seed's closed form, evaluated directly in long double (no log-sum-exp shift).
+/// The closed form of docs/method.md#super-elliptic-blend, evaluated directly in long double (no log-sum-exp shift).
 double closedForm(Op op, double p, double a, double b)
 {
     const long double P = p, A = a, B = b;

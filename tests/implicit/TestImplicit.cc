@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Unit tests for the implicit-function nodes: primitives, quadrics, CSG and transforms.
 // Every value is checked against a closed form written here, independently of the library.
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Blender side of test_blender.py: opens .vdb files the way a Blender user does and reports.
 
 Run as `blender -b --factory-startup --python blender_check.py -- JOB.json RESULT.json`.

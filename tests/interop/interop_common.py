@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Shared set-up of the interoperability tests: the ivdb binary, the programs they need, every
 kind of .vdb file ivdb writes (made once per test class in a temporary folder), and readers of
 active voxels through pyopenvdb.

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Blender (Debian 12's blender 3.4, headless) opens every kind of .vdb file ivdb writes as a
 Volume object with the expected grids; its Volume to Mesh modifier on `surface` (threshold 0)
 encloses the analytic volume of a sphere, an ellipsoid and a box within 0.5%; a `--fog` file

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """OpenVDB's Python module (Debian's python3-openvdb, `import pyopenvdb`) reads every kind of
 .vdb file ivdb writes: grid names, classes, value types, transforms and bounding boxes agree with
 `ivdb info --json`, and the values at the active voxels agree with closed forms.

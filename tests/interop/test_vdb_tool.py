@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """OpenVDB's own command-line tools (Debian's libopenvdb-tools) and ivdb read each other's files,
 and where vdb_tool computes the same thing (sharp CSG without rebuild, gradient, mean curvature)
 ivdb's values equal its values within 1e-5 at every active voxel, with the same active voxels.

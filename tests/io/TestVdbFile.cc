@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // .vdb files: atomic writes, reads that refuse bad files with an IoError naming the path,
 // and the grid description that `ivdb info` prints.
 #include <ivdb/io/VdbFile.h>

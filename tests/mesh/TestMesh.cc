@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Meshes (mesh::meshLevelSet, the OBJ and PLY writers), colormaps against matplotlib, and the
 // fog volume.
 #include <ivdb/levelset/Fog.h>

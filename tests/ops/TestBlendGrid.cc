@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Grid blend (ops::blend): against the analytic blended surface of two exact spheres.
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Primitives.h>

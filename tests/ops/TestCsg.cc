@@ -1,4 +1,5 @@
-// Sharp CSG of level-set grids (seed eqs. 1-3): the surfaces of ops::csg and of scene-level CSG
+// SPDX-License-Identifier: Apache-2.0
+// Sharp CSG of level-set grids (docs/method.md#csg): the surfaces of ops::csg and of scene-level CSG
 // against the analytic surface (min, max, max(A, -B) of exact distances written here), equality
 // with OpenVDB's csg*Copy tools, resampling of mixed voxel sizes, threaded == serial.
 #include <ivdb/implicit/Primitives.h>

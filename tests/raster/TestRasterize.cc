@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Rasterizer tests: against OpenVDB's createLevelSetSphere, closed-form quadric surfaces, and the
 // dense path (sparse must equal dense for the data scenes and for random CSG trees).
 #include <ivdb/implicit/Csg.h>

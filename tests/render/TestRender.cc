@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The ray-traced renderer: a sphere's silhouette against its analytic projection, and the PNG and
 // EXR files read back through libpng and OpenEXR.
 #include <ivdb/render/Render.h>

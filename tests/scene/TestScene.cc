@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Scene files: every node type parses to the right function, defaults apply, and every bad
 // input is refused with a SceneError naming the file, the JSON path and the value.
 #include <ivdb/scene/Scene.h>

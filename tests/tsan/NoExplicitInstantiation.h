@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Force-included into every file of a ThreadSanitizer build (see the top-level CMakeLists.txt).
 //
 // OpenVDB 10 declares its common template instantiations (tools, trees, node managers) extern and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A deliberate data race in parallel bodies (parallel_for, parallel_reduce, task_group), run by
 // the TSan stage of scripts/sanitize.sh with tests/tsan/TbbTsanBridge.cc loaded: TSan must still
 // report it, or the bridge (or a suppression) hides real races and the stage fails.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Tells ThreadSanitizer about oneTBB's synchronization, which it cannot see because Debian's
 // libtbb is not instrumented. Without this, TSan reports TBB's own bookkeeping (task spawn and
 // steal, the partitioner's fold_tree, parallel_reduce joins, reused task memory) as races with

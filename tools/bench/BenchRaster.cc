@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Micro-benchmarks: each ivdb kernel beside OpenVDB's equivalent, in the same binary and run.
 // Run on demand: build/bin/ivdb_bench [--benchmark_filter=...]; not part of the test suite.
 #include <ivdb/implicit/Csg.h>

@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: Apache-2.0
 """Plot `ivdb bench` results: log-log time and memory against resolution.
 
 Usage: plot_bench.py BENCH.csv BENCH.png

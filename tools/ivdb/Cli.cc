@@ -1,23 +1,19 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "Cli.h"
 
-#include <ivdb/levelset/Fog.h>
-
 #include <ivdb/Version.h>
-#include <ivdb/diff/Differential.h>
-#include <ivdb/io/VdbFile.h>
+#include <ivdb/io/AtomicFile.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/openvdb.h>
 
 #include <tbb/global_control.h>
 
-#include <atomic>
 #include <cmath>
-#include <filesystem>
 #include <csignal>
 #include <cstdio>
+#include <exception>
 #include <iostream>
-#include <optional>
 
 #include <unistd.h>
 
@@ -64,7 +60,38 @@ void installSignalHandlers()
     std::signal(SIGXFSZ, SIG_IGN);
 }
 
+// The chosen subcommand's names for library parameters (see Command).
+std::shared_ptr<std::map<std::string, std::string>> gFlags;
+
+std::string errorMessage(const std::exception& e)
+{
+    if (const auto* p = dynamic_cast<const ParamError*>(&e); p && gFlags) {
+        const auto it = gFlags->find(p->param());
+        if (it != gFlags->end()) return p->describe(it->second);
+    }
+    return util::errorText(e);
+}
+
 } // namespace
+
+Command::Command(CLI::App& app, const std::string& name, const std::string& help)
+    : mApp(app.add_subcommand(name, help)), mFlags(std::make_shared<std::map<std::string, std::string>>())
+{
+}
+
+std::string Command::displayName(const CLI::Option& o)
+{
+    return o.get_name(/*positional=*/false, /*all_options=*/false);
+}
+
+void Command::onRun(Action& action, std::function<int()> work)
+{
+    auto flags = mFlags;
+    mApp->callback([&action, flags, work = std::move(work)]() {
+        gFlags = flags;
+        action = work;
+    });
+}
 
 Progress::Progress(std::string label): mLabel(std::move(label)), mTerminal(::isatty(2) == 1) {}
 
@@ -84,8 +111,9 @@ void Progress::end()
     if (mTerminal && mLastPercent >= 0) std::fprintf(stderr, "\r\033[K");
     mLastPercent = -1;
     gCooperative = 0;
-    // A signal that came after the operation's last poll: nothing is being written yet.
-    if (gInterrupted.load()) exitOnSignal(gSignal);
+    // A signal that came after the operation's last poll: nothing is being written yet. (When
+    // the operation is ending on an exception, run() reports the interruption instead.)
+    if (gInterrupted.load() && std::uncaught_exceptions() == 0) exitOnSignal(gSignal);
 }
 
 bool Progress::wasInterrupted(int percent)
@@ -99,92 +127,24 @@ bool Progress::wasInterrupted(int percent)
     return gInterrupted.load();
 }
 
-raster::RasterSettings sceneSettings(const scene::Scene& sc, const std::string& scenePath,
-                                     std::optional<double> voxelSize,
-                                     std::optional<double> halfWidth)
+void printNotes(const std::vector<std::string>& notes, const std::vector<std::string>& warnings)
 {
-    raster::RasterSettings settings;
-    if (voxelSize) {
-        if (!(*voxelSize > 0.0) || !std::isfinite(*voxelSize)) {
-            throw std::runtime_error("--voxel-size must be > 0 and finite, got " +
-                                     util::formatNumber(*voxelSize));
-        }
-        settings.voxelSize = *voxelSize;
-    } else if (sc.voxelSize) {
-        settings.voxelSize = *sc.voxelSize;
-    } else {
-        throw std::runtime_error(scenePath + ": voxel_size is missing: add \"voxel_size\" to the "
-                                 "scene or pass --voxel-size");
-    }
-    settings.halfWidth = sc.halfWidth;
-    if (halfWidth) {
-        if (!(*halfWidth >= 1.0 && *halfWidth <= raster::kMaxHalfWidth)) {
-            throw std::runtime_error("--half-width must be in [1, " +
-                                     util::formatNumber(raster::kMaxHalfWidth) + "] voxels, got " +
-                                     util::formatNumber(*halfWidth));
-        }
-        settings.halfWidth = *halfWidth;
-    }
-    settings.bounds = sc.bounds;
-    settings.distance = sc.distanceBound ? raster::Distance::Bound : raster::Distance::Exact;
-    return settings;
+    for (const auto& n : notes) std::cerr << "ivdb: note: " << n << std::endl;
+    for (const auto& w : warnings) std::cerr << "ivdb: warning: " << w << std::endl;
 }
 
-void warn(const std::string& what)
+void addFogFlag(Command& cmd, bool& fog)
 {
-    std::cerr << "ivdb: warning: " << what << std::endl;
+    cmd.flag("--fog", fog,
+             "Also write a 'density' fog volume (0 outside, a ramp across the inside of the "
+             "band, 1 deeper inside) so Blender renders the file as a volume");
 }
 
-openvdb::FloatGrid::Ptr readLevelSet(const std::string& path, const std::string& grid)
+void addQuietFlag(Command& cmd, bool& quiet)
 {
-    const openvdb::GridBase::Ptr g = io::selectGrid(io::readVdb(path), path, grid);
-    diff::checkLevelSet(*g, path + ": grid '" + g->getName() + "'");
-    io::checkGridValues(*g, path);
-    return openvdb::gridPtrCast<openvdb::FloatGrid>(g);
+    cmd.flag("-q,--quiet", quiet, "Do not print the summary line");
 }
 
-void stampGrid(openvdb::GridBase& grid, const std::string& source)
-{
-    grid.setCreator(std::string("ivdb ") + kVersion); // Houdini shows it as vdb_creator
-    grid.insertMeta("ivdb_version", openvdb::StringMetadata(kVersion));
-    grid.insertMeta("ivdb_source", openvdb::StringMetadata(source));
-}
-
-void writeOutput(const std::string& path, const openvdb::GridCPtrVec& grids)
-{
-    openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    io::writeVdb(path, grids, fileMeta);
-}
-
-openvdb::GridCPtrVec withFog(const openvdb::FloatGrid::Ptr& surface, bool fog)
-{
-    openvdb::GridCPtrVec grids{surface};
-    if (fog) {
-        openvdb::FloatGrid::Ptr density = levelset::fogFromLevelSet(*surface);
-        for (const char* key : {"creator", "ivdb_version", "ivdb_source"}) {
-            if (auto meta = (*surface)[key]) density->insertMeta(key, *meta);
-        }
-        grids.push_back(density);
-    }
-    return grids;
-}
-
-void addFogFlag(CLI::App& cmd, bool& fog)
-{
-    cmd.add_flag("--fog", fog,
-                 "Also write a 'density' fog volume (0 outside, a ramp across the inside of the "
-                 "band, 1 deeper inside) so Blender renders the file as a volume");
-}
-
-ops::CsgOp csgOp(const std::string& word)
-{
-    return word == "union" ? ops::CsgOp::Union
-         : word == "intersection" ? ops::CsgOp::Intersection
-                                  : ops::CsgOp::Difference;
-}
-
-// "LO,HI" with LO < HI, both finite.
 std::pair<double, double> parseRange(const std::string& text)
 {
     const auto comma = text.find(',');
@@ -200,43 +160,13 @@ std::pair<double, double> parseRange(const std::string& text)
         lo = hi = std::nan("");
     }
     if (!std::isfinite(lo) || !std::isfinite(hi)) {
-        throw std::runtime_error("--range must be LO,HI (two finite numbers), got '" + text + "'");
+        throw ParamError(param::kRange, "must be LO,HI (two finite numbers), got '" + text + "'");
     }
     if (!(lo < hi)) {
-        throw std::runtime_error("--range needs LO < HI, got " + util::formatNumber(lo) + "," +
-                                 util::formatNumber(hi));
+        throw ParamError(param::kRange, "needs LO < HI, got " + util::formatNumber(lo) + "," +
+                                            util::formatNumber(hi));
     }
     return {lo, hi};
-}
-
-openvdb::GridBase::Ptr readColorGrid(const std::string& spec, bool withRange, bool withColormap)
-{
-    std::string path = spec, name;
-    const auto colon = spec.rfind(':');
-    if (!std::filesystem::exists(spec) && colon != std::string::npos) {
-        path = spec.substr(0, colon);
-        name = spec.substr(colon + 1);
-    }
-    const openvdb::GridPtrVec grids = io::readVdb(path);
-    if (grids.empty()) throw std::runtime_error(path + ": the file holds no grid");
-    openvdb::GridBase::Ptr g = name.empty() ? grids.front() : io::selectGrid(grids, path, name);
-    if (g->isType<openvdb::Vec3SGrid>()) {
-        if (withRange || withColormap) {
-            throw std::runtime_error(path + ": grid '" + g->getName() + "' is a vector grid, "
-                                     "coloured by direction: --colormap and --range apply to "
-                                     "scalar grids only");
-        }
-    } else if (!g->isType<openvdb::FloatGrid>()) {
-        throw std::runtime_error(path + ": grid '" + g->getName() + "' is a " + g->valueType() +
-                                 " grid; --color-by needs a float (scalar) or vec3s (vector) grid");
-    }
-    io::checkGridValues(*g, path);
-    return g;
-}
-
-void printNotes(const std::vector<std::string>& notes)
-{
-    for (const auto& n : notes) std::cerr << "ivdb: note: " << n << std::endl;
 }
 
 int run(int argc, char** argv)
@@ -296,7 +226,7 @@ int run(int argc, char** argv)
             std::cerr << "ivdb: error: interrupted; nothing was written" << std::endl;
             return 128 + gSignal;
         }
-        std::cerr << "ivdb: error: " << util::errorText(e) << std::endl;
+        std::cerr << "ivdb: error: " << errorMessage(e) << std::endl;
         return 1;
     } catch (...) {
         std::cerr << "ivdb: error: unknown failure" << std::endl;

@@ -1,18 +1,20 @@
+// SPDX-License-Identifier: Apache-2.0
+// The ivdb command line: each subcommand declares its options once (so --help cannot drift),
+// parses them into a library job's options, calls the job and prints its result.
 #pragma once
 
-#include <ivdb/ops/Csg.h>
-#include <ivdb/raster/Rasterize.h>
-#include <ivdb/scene/Scene.h>
-
-#include <openvdb/util/NullInterrupter.h>
+#include <ivdb/util/Interrupt.h>
+#include <ivdb/util/Params.h>
 
 #include <CLI/CLI.hpp>
 
 #include <atomic>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace ivdb::cli {
@@ -25,7 +27,46 @@ int run(int argc, char** argv);
 /// @brief The work a subcommand does once its options are parsed; returns the exit code.
 using Action = std::function<int()>;
 
-/// @name Subcommands: each declares its options once (so --help cannot drift) and sets @a action
+/// @brief A subcommand being declared. Options that set a library parameter are declared with
+/// it, so that a ParamError from the library names the option the user typed.
+class Command
+{
+public:
+    Command(CLI::App& app, const std::string& name, const std::string& help);
+
+    CLI::App& app() { return *mApp; }
+
+    /// @brief An option (or positional) bound to @a value that sets library parameter @a param.
+    template<typename T>
+    CLI::Option* add(const std::string& names, T& value, const std::string& help = "",
+                     const Param* param = nullptr)
+    {
+        CLI::Option* o = mApp->add_option(names, value, help);
+        if (param) mFlags->emplace(param->id, displayName(*o));
+        return o;
+    }
+
+    /// @brief A flag bound to @a value.
+    CLI::Option* flag(const std::string& names, bool& value, const std::string& help)
+    {
+        return mApp->add_flag(names, value, help);
+    }
+
+    /// @brief Name @a param as @a name in error messages (for parameters set by several options
+    /// or parsed from one, like --camera's fov).
+    void name(const Param& param, const std::string& name) { (*mFlags)[param.id] = name; }
+
+    /// @brief Run @a work (with the parsed options) when this subcommand is the one given.
+    void onRun(Action& action, std::function<int()> work);
+
+private:
+    static std::string displayName(const CLI::Option& o);
+
+    CLI::App* mApp;
+    std::shared_ptr<std::map<std::string, std::string>> mFlags;
+};
+
+/// @name Subcommands: each declares its options and sets @a action when it is chosen
 /// @{
 void addRasterize(CLI::App& app, Action& action);
 void addInfo(CLI::App& app, Action& action);
@@ -40,15 +81,9 @@ void addGlyphs(CLI::App& app, Action& action);
 void addRender(CLI::App& app, Action& action);
 /// @}
 
-/// @brief Rasterizer settings from a scene and the command line's --voxel-size and --half-width.
-/// @throw std::runtime_error naming the option or the scene file when a value is missing or bad
-raster::RasterSettings sceneSettings(const scene::Scene& scene, const std::string& scenePath,
-                                     std::optional<double> voxelSize,
-                                     std::optional<double> halfWidth);
-
 /// @brief Progress on stderr when it is a terminal, and cancellation: between start() and end()
 /// a SIGINT, SIGTERM or SIGHUP makes wasInterrupted() true (see run()).
-class Progress final: public openvdb::util::NullInterrupter
+class Progress final: public util::Interrupter
 {
 public:
     explicit Progress(std::string label);
@@ -63,41 +98,27 @@ private:
     std::atomic<int> mLastPercent{-1}; // called from TBB workers at once
 };
 
-/// @brief Print a warning line `ivdb: warning: <what>` on stderr.
-void warn(const std::string& what);
-
-/// @brief The level set @a grid (or the first level set) of the .vdb file @a path, checked to be
-/// a scalar float level set with cubic voxels.
-/// @throw openvdb::Exception naming the file, the grid and what to pick instead
-openvdb::FloatGrid::Ptr readLevelSet(const std::string& path, const std::string& grid);
-
-/// @brief Stamp @a grid with `ivdb_version` and `ivdb_source` (what made it).
-void stampGrid(openvdb::GridBase& grid, const std::string& source);
-
-/// @brief {@a surface}, plus a `density` fog volume made from it when @a fog (--fog), stamped
-/// like @a surface.
-openvdb::GridCPtrVec withFog(const openvdb::FloatGrid::Ptr& surface, bool fog);
+/// @brief Print `ivdb: warning: <what>` for each warning and `ivdb: note: <what>` for each note.
+void printNotes(const std::vector<std::string>& notes, const std::vector<std::string>& warnings = {});
 
 /// @brief The --fog flag of the commands that write a level set.
-void addFogFlag(CLI::App& cmd, bool& fog);
+void addFogFlag(Command& cmd, bool& fog);
 
-/// @brief Write @a grids atomically to @a path with the file's `creator` metadata.
-void writeOutput(const std::string& path, const openvdb::GridCPtrVec& grids);
+/// @brief The -q flag of the commands that print a summary line.
+void addQuietFlag(Command& cmd, bool& quiet);
 
-/// @brief "union" | "intersection" | "difference" (the CLI checked the word) as an operation.
-ops::CsgOp csgOp(const std::string& word);
-
-/// @brief `--range LO,HI`: two finite numbers with LO < HI.
-/// @throw std::runtime_error naming --range and the text
+/// @brief `LO,HI`: two finite numbers with LO < HI.
+/// @throw ParamError (parameter "range") naming the text
 std::pair<double, double> parseRange(const std::string& text);
 
-/// @brief The grid of `--color-by FILE.vdb[:GRID]` (a path that exists is taken whole; without
-/// GRID the file's first grid), checked to be float (scalar) or vec3s (vector). A vector grid is
-/// coloured by direction, so @a withRange or @a withColormap (given explicitly) is refused.
-/// @throw std::runtime_error or openvdb::Exception naming the file and grid
-openvdb::GridBase::Ptr readColorGrid(const std::string& spec, bool withRange, bool withColormap);
-
-/// @brief Print each note as `ivdb: note: ...` on stderr.
-void printNotes(const std::vector<std::string>& notes);
+/// @brief The word's value in @a names (the CLI checked it is one of them).
+template<typename Enum>
+Enum enumOf(const std::string& word, const std::vector<std::string>& names)
+{
+    for (size_t i = 0; i < names.size(); ++i) {
+        if (names[i] == word) return static_cast<Enum>(i);
+    }
+    return static_cast<Enum>(0);
+}
 
 } // namespace ivdb::cli

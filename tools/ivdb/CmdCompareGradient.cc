@@ -1,10 +1,8 @@
+// SPDX-License-Identifier: Apache-2.0
 // ivdb compare-gradient: discrete gradient of the rasterized scene vs its analytic gradient.
 #include "Cli.h"
 
-#include <ivdb/diff/Differential.h>
-#include <ivdb/raster/Rasterize.h>
-#include <ivdb/scene/Scene.h>
-#include <ivdb/util/System.h>
+#include <ivdb/jobs/Differentiate.h>
 
 #include <nlohmann/json.hpp>
 
@@ -15,11 +13,9 @@ namespace ivdb::cli {
 
 namespace {
 
-struct CompareOptions
+struct CompareArgs
 {
-    std::string scene;
-    std::optional<double> voxelSize, halfWidth;
-    std::vector<int> steps{1};
+    jobs::CompareGradientOptions job;
     bool json = false;
 };
 
@@ -28,47 +24,33 @@ nlohmann::json toJson(const diff::ErrorStats& s)
     return {{"count", s.count}, {"mean", s.mean}, {"median", s.median}, {"p95", s.p95}, {"max", s.max}};
 }
 
-int runCompare(const CompareOptions& opt)
+nlohmann::json toJson(const diff::GradientErrors& e)
 {
-    for (int k : opt.steps) {
-        if (k < 1 || k > diff::kMaxStep) {
-            throw std::runtime_error("--step must be in [1, " + std::to_string(diff::kMaxStep) +
-                                     "] voxels, got " + std::to_string(k));
-        }
-    }
-    const scene::Scene sc = scene::loadScene(opt.scene);
-    raster::RasterSettings settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
-    Progress progress("compare-gradient " + opt.scene);
-    settings.interrupter = &progress;
-    openvdb::FloatGrid::Ptr phi;
-    try {
-        phi = raster::rasterize(sc.shape, settings);
-    } catch (const std::exception& e) {
-        throw std::runtime_error(opt.scene + ": " + util::errorText(e));
-    }
-    const auto shape = raster::clipToBounds(sc.shape, settings);
+    return {{"voxels", e.angleDeg.count}, {"angle_deg", toJson(e.angleDeg)},
+            {"magnitude_error", toJson(e.magnitudeError)},
+            {"mean_magnitude", e.meanMagnitude}, {"skipped", e.skipped}};
+}
+
+void printJson(const CompareArgs& a, const jobs::CompareGradientResult& r)
+{
     nlohmann::json rows = nlohmann::json::array();
-    if (!opt.json) {
-        std::printf("%s: discrete gradient of the rasterized band (%llu voxels, voxel size %g) vs "
-                    "the normalized analytic gradient\n",
-                    opt.scene.c_str(), (unsigned long long)phi->activeVoxelCount(), settings.voxelSize);
-        std::printf("%24s  %35s  %48s\n", "", "angle error (degrees)",
-                    "magnitude error | |grad| - 1 |");
-        std::printf("%4s %-8s %9s  %8s %8s %8s %8s  %8s %9s %9s %9s %9s\n", "step", "voxels", "count",
-                    "mean", "median", "p95", "max", "mean|g|", "mean", "median", "p95", "max");
+    for (const auto& [k, c] : r.steps) {
+        rows.push_back({{"step", k}, {"band", toJson(c.band)}, {"interior", toJson(c.interior)}});
     }
-    for (int k : opt.steps) {
-        const auto grad = diff::gradient(*phi, k);
-        const diff::GradientComparison c = diff::compareGradient(*shape, *phi, *grad, k);
-        auto row = [](const diff::GradientErrors& e) {
-            return nlohmann::json{{"voxels", e.angleDeg.count}, {"angle_deg", toJson(e.angleDeg)},
-                                  {"magnitude_error", toJson(e.magnitudeError)},
-                                  {"mean_magnitude", e.meanMagnitude}, {"skipped", e.skipped}};
-        };
-        if (opt.json) {
-            rows.push_back({{"step", k}, {"band", row(c.band)}, {"interior", row(c.interior)}});
-            continue;
-        }
+    std::cout << nlohmann::json{{"scene", a.job.scene}, {"voxel_size", r.voxelSize},
+                                {"active_voxels", r.activeVoxels}, {"steps", rows}}.dump(2)
+              << std::endl;
+}
+
+void printTable(const CompareArgs& a, const jobs::CompareGradientResult& r)
+{
+    std::printf("%s: discrete gradient of the rasterized band (%llu voxels, voxel size %g) vs "
+                "the normalized analytic gradient\n",
+                a.job.scene.c_str(), (unsigned long long)r.activeVoxels, r.voxelSize);
+    std::printf("%24s  %35s  %48s\n", "", "angle error (degrees)", "magnitude error | |grad| - 1 |");
+    std::printf("%4s %-8s %9s  %8s %8s %8s %8s  %8s %9s %9s %9s %9s\n", "step", "voxels", "count",
+                "mean", "median", "p95", "max", "mean|g|", "mean", "median", "p95", "max");
+    for (const auto& [k, c] : r.steps) {
         for (const auto& [label, e] : {std::pair<const char*, const diff::GradientErrors&>{"band", c.band},
                                        {"interior", c.interior}}) {
             std::printf("%4d %-8s %9zu  %8.4f %8.4f %8.4f %8.4f  %8.5f %9.5f %9.5f %9.5f %9.5f\n", k,
@@ -77,15 +59,17 @@ int runCompare(const CompareOptions& opt)
                         e.magnitudeError.median, e.magnitudeError.p95, e.magnitudeError.max);
         }
     }
-    if (!opt.json) {
-        std::printf("band: every band voxel; interior: voxels whose stencil stays in the band (the "
-                    "others read the clamped background)\n");
-    }
-    if (opt.json) {
-        std::cout << nlohmann::json{{"scene", opt.scene}, {"voxel_size", settings.voxelSize},
-                                    {"active_voxels", phi->activeVoxelCount()}, {"steps", rows}}.dump(2)
-                  << std::endl;
-    }
+    std::printf("band: every band voxel; interior: voxels whose stencil stays in the band (the "
+                "others read the clamped background)\n");
+}
+
+int runCompare(CompareArgs& a)
+{
+    Progress progress("compare-gradient " + a.job.scene);
+    a.job.interrupter = &progress;
+    const jobs::CompareGradientResult r = jobs::compareGradient(a.job);
+    if (a.json) printJson(a, r);
+    else printTable(a, r);
     return 0;
 }
 
@@ -93,20 +77,21 @@ int runCompare(const CompareOptions& opt)
 
 void addCompareGradient(CLI::App& app, Action& action)
 {
-    auto opt = std::make_shared<CompareOptions>();
-    CLI::App* cmd = app.add_subcommand("compare-gradient",
+    auto a = std::make_shared<CompareArgs>();
+    Command cmd(app, "compare-gradient",
         "Rasterize a scene and compare the discrete gradient of its band (central differences, "
         "step K voxels) with the normalized analytic gradient: angle and magnitude error "
-        "statistics per step (the seed's section 3.3 observation)");
-    cmd->add_option("scene", opt->scene, "Scene file (JSON)")->required();
-    cmd->add_option("--step", opt->steps, "Difference step(s) K in voxels, in [1, 20] (give "
-                                          "several: --step 1 2 4)")
+        "statistics per step");
+    cmd.add("scene", a->job.scene, "Scene file (JSON)")->required();
+    cmd.add("--step", a->job.steps,
+            "Difference step(s) K in voxels, in [1, 20] (give several: --step 1 2 4)", &param::kStep)
         ->capture_default_str();
-    cmd->add_option("--voxel-size", opt->voxelSize, "World units per voxel (overrides the scene)");
-    cmd->add_option("--half-width", opt->halfWidth,
-                    "Band half width in voxels, in [1, 1000] (overrides the scene)");
-    cmd->add_flag("--json", opt->json, "Print JSON instead of a table");
-    cmd->callback([&action, opt]() { action = [opt]() { return runCompare(*opt); }; });
+    cmd.add("--voxel-size", a->job.voxelSize, "World units per voxel (overrides the scene)",
+            &param::kVoxelSize);
+    cmd.add("--half-width", a->job.halfWidth,
+            "Band half width in voxels, in [1, 1000] (overrides the scene)", &param::kHalfWidth);
+    cmd.flag("--json", a->json, "Print JSON instead of a table");
+    cmd.onRun(action, [a]() { return runCompare(*a); });
 }
 
 } // namespace ivdb::cli

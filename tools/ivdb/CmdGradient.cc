@@ -1,59 +1,30 @@
-// ivdb gradient: the central-difference gradient of a level set (seed eq. 9).
+// SPDX-License-Identifier: Apache-2.0
+// ivdb gradient: the central-difference gradient of a level set (docs/method.md#discrete-gradient).
 #include "Cli.h"
 
-#include <ivdb/Version.h>
-#include <ivdb/diff/Differential.h>
-#include <ivdb/io/VdbFile.h>
-#include <ivdb/util/System.h>
+#include <ivdb/jobs/Differentiate.h>
 
-#include <chrono>
 #include <cstdio>
 
 namespace ivdb::cli {
 
 namespace {
 
-struct GradientOptions
+struct GradientArgs
 {
-    std::string input, output, grid;
-    int step = 1;
-    bool magnitude = false, withInput = false, quiet = false;
+    jobs::GradientOptions job;
+    bool quiet = false;
 };
 
-int runGradient(const GradientOptions& opt)
+int runGradient(const GradientArgs& a)
 {
-    const auto t0 = std::chrono::steady_clock::now();
-    if (opt.step < 1 || opt.step > diff::kMaxStep) {
-        throw std::runtime_error("--step must be in [1, " + std::to_string(diff::kMaxStep) +
-                                 "] voxels, got " + std::to_string(opt.step));
-    }
-    io::checkOutputPath(opt.output);
-    const auto phi = readLevelSet(opt.input, opt.grid);
-
-    const auto t1 = std::chrono::steady_clock::now();
-    auto grad = diff::gradient(*phi, opt.step);
-    const auto t2 = std::chrono::steady_clock::now();
-
-    const std::string source = opt.input + ":" + phi->getName();
-    stampGrid(*grad, source);
-    grad->insertMeta("ivdb_step_voxels", openvdb::Int32Metadata(opt.step));
-    openvdb::GridCPtrVec out{grad};
-    if (opt.magnitude) {
-        auto mag = diff::magnitude(*grad);
-        stampGrid(*mag, source);
-        out.push_back(mag);
-    }
-    if (opt.withInput) out.push_back(phi);
-    writeOutput(opt.output, out);
-    const auto t3 = std::chrono::steady_clock::now();
-    if (!opt.quiet) {
+    const jobs::GradientResult r = jobs::gradient(a.job);
+    if (!a.quiet) {
         std::printf("%s: gradient of '%s', step %d, %llu active voxels, read %.3f s, compute "
                     "%.3f s, total %.3f s -> %s\n",
-                    opt.input.c_str(), phi->getName().c_str(), opt.step,
-                    (unsigned long long)grad->activeVoxelCount(),
-                    std::chrono::duration<double>(t1 - t0).count(),
-                    std::chrono::duration<double>(t2 - t1).count(),
-                    std::chrono::duration<double>(t3 - t0).count(), opt.output.c_str());
+                    a.job.input.c_str(), r.input->getName().c_str(), a.job.step,
+                    (unsigned long long)r.gradient->activeVoxelCount(), r.readSeconds,
+                    r.computeSeconds, r.totalSeconds, a.job.output.c_str());
     }
     return 0;
 }
@@ -62,20 +33,21 @@ int runGradient(const GradientOptions& opt)
 
 void addGradient(CLI::App& app, Action& action)
 {
-    auto opt = std::make_shared<GradientOptions>();
-    CLI::App* cmd = app.add_subcommand("gradient",
-        "Central-difference gradient of a level set (seed eq. 9): a covariant world-space "
-        "Vec3SGrid 'gradient' on the input's band");
-    cmd->add_option("input", opt->input, "Input .vdb file")->required();
-    cmd->add_option("-o,--output", opt->output, "Output .vdb file (written atomically)")->required();
-    cmd->add_option("--step", opt->step,
-                    "Difference step K in voxels: (phi(x+K) - phi(x-K)) / (2 K dx); in [1, 20]")
+    auto a = std::make_shared<GradientArgs>();
+    Command cmd(app, "gradient",
+        "Central-difference gradient of a level set: a covariant world-space Vec3SGrid "
+        "'gradient' on the input's band");
+    cmd.add("input", a->job.input, "Input .vdb file")->required();
+    cmd.add("-o,--output", a->job.output, "Output .vdb file (written atomically)")->required();
+    cmd.add("--step", a->job.step,
+            "Difference step K in voxels: (phi(x+K) - phi(x-K)) / (2 K dx); in [1, 20]",
+            &param::kStep)
         ->capture_default_str();
-    cmd->add_option("--grid", opt->grid, "Input grid name (default: the first level set)");
-    cmd->add_flag("--magnitude", opt->magnitude, "Also write 'gradient_magnitude' (|gradient|)");
-    cmd->add_flag("--with-input", opt->withInput, "Also copy the input grid into the output file");
-    cmd->add_flag("-q,--quiet", opt->quiet, "Do not print the summary line");
-    cmd->callback([&action, opt]() { action = [opt]() { return runGradient(*opt); }; });
+    cmd.add("--grid", a->job.grid, "Input grid name (default: the first level set)", &param::kGrid);
+    cmd.flag("--magnitude", a->job.magnitude, "Also write 'gradient_magnitude' (|gradient|)");
+    cmd.flag("--with-input", a->job.withInput, "Also copy the input grid into the output file");
+    addQuietFlag(cmd, a->quiet);
+    cmd.onRun(action, [a]() { return runGradient(*a); });
 }
 
 } // namespace ivdb::cli

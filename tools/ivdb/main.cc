@@ -1,4 +1,5 @@
-// The ivdb command line: a thin entry point over the ivdb_cli library.
+// SPDX-License-Identifier: Apache-2.0
+// The ivdb command line: a thin entry point (see Cli.h).
 #include "Cli.h"
 
 int main(int argc, char** argv)

@@ -1,4 +1,8 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/diff/Differential.h>
+
+#include <ivdb/levelset/LevelSet.h>
+#include <ivdb/util/Params.h>
 
 #include <ivdb/util/System.h>
 
@@ -75,19 +79,6 @@ private:
     bool mFacesOnly;
     std::vector<float> mData;
 };
-
-double uniformVoxelSize(const openvdb::GridBase& grid)
-{
-    const openvdb::Vec3d v = grid.voxelSize();
-    if (!grid.transform().isLinear() || std::abs(v[0] - v[1]) > 1e-9 * v[0] ||
-        std::abs(v[0] - v[2]) > 1e-9 * v[0]) {
-        OPENVDB_THROW(openvdb::ValueError,
-            "the grid's voxels are not cubes (voxel size " + util::formatNumber(v[0]) + " x " +
-            util::formatNumber(v[1]) + " x " + util::formatNumber(v[2]) +
-            "); resample it to a uniform linear transform first");
-    }
-    return v[0];
-}
 
 template<typename Fn>
 void runMaybeSerial(bool threaded, Fn&& fn)
@@ -198,32 +189,10 @@ struct Derivatives
 
 } // namespace
 
-void checkLevelSet(const openvdb::GridBase& grid, const std::string& what)
-{
-    if (!grid.isType<openvdb::FloatGrid>()) {
-        OPENVDB_THROW(openvdb::TypeError, what + " holds " + grid.valueType() +
-            " values; this needs a scalar float level set (a grid such as 'surface' from ivdb "
-            "rasterize), pick one with --grid");
-    }
-    if (grid.getGridClass() == openvdb::GRID_FOG_VOLUME) {
-        OPENVDB_THROW(openvdb::TypeError, what + " is a fog volume (density), not a level set; "
-            "pick the level set with --grid (ivdb writes it as 'surface')");
-    }
-    if (grid.getGridClass() != openvdb::GRID_LEVEL_SET) {
-        OPENVDB_THROW(openvdb::TypeError, what + " has grid class '" +
-            openvdb::GridBase::gridClassToString(grid.getGridClass()) +
-            "', not a level set; pick a level set with --grid");
-    }
-    uniformVoxelSize(grid);
-}
-
 openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step, bool threaded)
 {
-    if (step < 1 || step > kMaxStep) {
-        OPENVDB_THROW(openvdb::ValueError, "the gradient step must be in [1, " +
-            std::to_string(kMaxStep) + "] voxels, got " + std::to_string(step));
-    }
-    const double dx = uniformVoxelSize(phi);
+    check(limits::kStep, step);
+    const double dx = levelset::uniformVoxelSize(phi);
     const float inv = float(1.0 / (2.0 * step * dx));
     auto out = stencilMap<openvdb::Vec3SGrid>(phi, step, /*axesOnly=*/true, openvdb::Vec3s(0.0f), threaded,
         [step, inv](const PaddedLeaf& b, int i, int j, int k) {
@@ -254,7 +223,7 @@ openvdb::FloatGrid::Ptr magnitude(const openvdb::Vec3SGrid& gradient)
 
 openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind, bool threaded)
 {
-    const double dx = uniformVoxelSize(phi);
+    const double dx = levelset::uniformVoxelSize(phi);
     openvdb::FloatGrid::Ptr out;
     switch (kind) {
     case Curvature::Mean: {
@@ -294,7 +263,7 @@ openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
 std::pair<openvdb::FloatGrid::Ptr, openvdb::FloatGrid::Ptr>
 principalCurvatures(const openvdb::FloatGrid& phi, bool threaded)
 {
-    const double invdx = 1.0 / uniformVoxelSize(phi);
+    const double invdx = 1.0 / levelset::uniformVoxelSize(phi);
     // k = H +/- sqrt(H^2 - K), from the same differences as the mean and Gaussian curvatures.
     auto principal = [&](double sign) {
         return stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,

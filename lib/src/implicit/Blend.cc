@@ -1,4 +1,7 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Blend.h>
+
+#include <ivdb/util/Params.h>
 
 #include <openvdb/Exceptions.h>
 
@@ -11,11 +14,7 @@ namespace ivdb::implicit {
 Blend::Blend(Op op, double p, std::vector<Ptr> children)
     : mOp(op), mP(p), mChildren(std::move(children))
 {
-    if (!(p >= 0.1 && p <= 1000.0)) {
-        std::ostringstream os;
-        os << "blend p must be in [0.1, 1000], got " << p;
-        OPENVDB_THROW(openvdb::ValueError, os.str());
-    }
+    check(limits::kBlendP, p);
     if (mChildren.empty()) OPENVDB_THROW(openvdb::ValueError, "blend needs children");
     for (const auto& c : mChildren) {
         if (!c) OPENVDB_THROW(openvdb::ValueError, "blend has a null child");

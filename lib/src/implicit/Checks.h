@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 // Input checks shared by the implicit nodes' constructors (internal to lib/src/implicit).
 

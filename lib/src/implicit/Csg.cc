@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Csg.h>
 
 #include <openvdb/Exceptions.h>
@@ -16,12 +17,7 @@ Csg::Csg(Op op, std::vector<Ptr> children): mOp(op), mChildren(std::move(childre
 
 std::string Csg::typeName() const
 {
-    switch (mOp) {
-    case Op::Union: return "union";
-    case Op::Intersection: return "intersection";
-    case Op::Difference: return "difference";
-    }
-    return "csg";
+    return toString(mOp);
 }
 
 double Csg::value(const Vec3d& p) const

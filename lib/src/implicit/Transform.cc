@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Csg.h>
 
 #include <openvdb/Exceptions.h>

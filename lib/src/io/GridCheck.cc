@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Checks of a grid read from a file before any command uses it: the transform and the values.
 #include <ivdb/io/VdbFile.h>
 

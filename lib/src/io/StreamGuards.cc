@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Guards around two functions of OpenVDB 10's reader (libopenvdb), which this program's own
 // definitions interpose by name (same versioned symbols; the dynamic linker binds both our calls
 // and libopenvdb's to the executable's definition).
@@ -9,6 +10,7 @@
 // allocated as it is (a damaged one asked for 37 PB, also found by fuzz_vdb). Here the count is
 // checked first; a valid block is then handed to OpenVDB's own function, unchanged.
 #include <openvdb/Exceptions.h>
+#include <openvdb/version.h>
 #include <openvdb/io/Compression.h>
 #include <openvdb/io/DelayedLoadMetadata.h>
 
@@ -18,6 +20,11 @@
 #include <cstring>
 #include <istream>
 #include <string>
+
+// The symbols below are OpenVDB 10.0's (CMakeLists.txt refuses other releases at configure time).
+static_assert(OPENVDB_LIBRARY_MAJOR_VERSION_NUMBER == 10 && OPENVDB_LIBRARY_MINOR_VERSION_NUMBER == 0,
+              "lib/src/io/StreamGuards.cc interposes OpenVDB 10.0's reader functions by their "
+              "mangled names: port it to this OpenVDB release");
 
 namespace {
 

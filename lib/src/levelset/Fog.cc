@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/levelset/Fog.h>
 
 #include <openvdb/tools/LevelSetUtil.h>

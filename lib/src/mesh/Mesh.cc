@@ -1,14 +1,20 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/mesh/Mesh.h>
 
-#include <ivdb/io/VdbFile.h>
+#include <ivdb/io/AtomicFile.h>
+#include <ivdb/render/Colormap.h>
+#include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
+#include <memory>
 #include <ostream>
 
 namespace ivdb::mesh {
@@ -39,10 +45,7 @@ std::uint8_t toByte(float c)
 
 Mesh meshLevelSet(const openvdb::FloatGrid& grid, double adaptivity)
 {
-    if (!(adaptivity >= 0.0 && adaptivity <= 1.0)) {
-        OPENVDB_THROW(openvdb::ValueError,
-                      "adaptivity must be in [0, 1], got " + util::formatNumber(adaptivity));
-    }
+    check(limits::kAdaptivity, adaptivity);
     Mesh m;
     openvdb::tools::volumeToMesh(grid, m.points, m.triangles, m.quads, 0.0, adaptivity, true);
     // volumeToMesh's winding depends on the sign convention; make the normals point outwards.
@@ -103,12 +106,77 @@ Mesh arrows(const std::vector<openvdb::Vec3d>& bases, const std::vector<openvdb:
             m.triangles.emplace_back(ring1 + k, ring1 + k1, ring2 + k1);
             m.triangles.emplace_back(capIdx, ring0 + k1, ring0 + k);    // base cap
         }
-        if (colors) {
-            const openvdb::Vec3f c(dir * 0.5 + openvdb::Vec3d(0.5));
-            colors->insert(colors->end(), 3 * kSides + 2, c);
-        }
+        if (colors) colors->insert(colors->end(), 3 * kSides + 2, render::directionColor(dir));
     }
     return m;
+}
+
+VertexData sampleVertexData(const Mesh& mesh, const openvdb::GridBase& grid,
+                            const render::Colormap& colormap,
+                            std::optional<std::pair<double, double>> range)
+{
+    VertexData data;
+    const size_t n = mesh.points.size();
+    data.colors.resize(n);
+    data.scalars.resize(n);
+    if (const auto* g = dynamic_cast<const openvdb::FloatGrid*>(&grid)) {
+        data.scalarName = g->getName().empty() ? "value" : g->getName();
+        openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> s(*g);
+        for (size_t i = 0; i < n; ++i) data.scalars[i] = s.wsSample(mesh.points[i]);
+        if (!range) {
+            double lo = std::numeric_limits<double>::max(), hi = -lo;
+            for (float v : data.scalars) lo = std::min(lo, double(v)), hi = std::max(hi, double(v));
+            if (!(lo < hi)) hi = lo + 1.0;
+            range.emplace(lo, hi);
+        }
+        for (size_t i = 0; i < n; ++i) {
+            data.colors[i] = colormap.map(data.scalars[i], range->first, range->second);
+        }
+    } else if (const auto* v = dynamic_cast<const openvdb::Vec3SGrid*>(&grid)) {
+        // A vector grid (a gradient): colour by direction, the scalar is the magnitude.
+        data.scalarName = "magnitude";
+        openvdb::tools::GridSampler<openvdb::Vec3SGrid, openvdb::tools::BoxSampler> s(*v);
+        for (size_t i = 0; i < n; ++i) {
+            const openvdb::Vec3s d = s.wsSample(mesh.points[i]);
+            data.scalars[i] = d.length();
+            data.colors[i] = render::directionColor(openvdb::Vec3d(d));
+        }
+    } else {
+        throw ParamError(param::kColorBy, "grid '" + grid.getName() + "' is a " + grid.valueType() +
+                         " grid; colouring needs a float (scalar) or vec3s (vector) grid");
+    }
+    return data;
+}
+
+ArrowSamples sampleArrows(const openvdb::Vec3SGrid& field, const openvdb::FloatGrid* surface,
+                          int stride, double near)
+{
+    check(limits::kStride, stride);
+    check(limits::kNear, near);
+    ArrowSamples out;
+    std::unique_ptr<openvdb::FloatGrid::ConstAccessor> acc;
+    if (surface) acc = std::make_unique<openvdb::FloatGrid::ConstAccessor>(surface->getConstAccessor());
+    for (auto it = field.cbeginValueOn(); it; ++it) {
+        if (!it.isVoxelValue()) continue;
+        const openvdb::Coord ijk = it.getCoord();
+        if (ijk.x() % stride || ijk.y() % stride || ijk.z() % stride) continue;
+        const openvdb::Vec3d world = field.indexToWorld(ijk);
+        if (acc) {
+            const openvdb::Coord s = surface->transform().worldToIndexCellCentered(world);
+            if (!(std::abs(acc->getValue(s)) < near * surface->voxelSize()[0])) continue;
+        }
+        out.bases.push_back(world);
+        out.vectors.emplace_back(*it);
+    }
+    return out;
+}
+
+void writeMesh(const std::string& path, const Mesh& mesh, const VertexData* data)
+{
+    const std::string ext = util::extensionOf(path);
+    if (ext == ".obj") writeObj(path, mesh, data);
+    else if (ext == ".ply") writePly(path, mesh, data);
+    else throw ParamError(param::kOutput, "must end in .obj or .ply, got '" + path + "'");
 }
 
 void writeObj(const std::string& path, const Mesh& mesh, const VertexData* data)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/ops/Csg.h>
 
 #include <openvdb/tools/ChangeBackground.h>

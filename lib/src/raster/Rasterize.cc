@@ -1,8 +1,11 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/raster/Rasterize.h>
 
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/levelset/Redistance.h>
+#include <ivdb/util/Interrupt.h>
+#include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/tools/Prune.h>
@@ -115,17 +118,7 @@ struct Context
     /// The band rule, on the stored float value: strictly inside the float background, so
     /// every active value is a distance smaller than the background.
     bool inBand(float v) const { return std::abs(v) < static_cast<float>(band); }
-
-    bool interrupted(int percent = -1) const
-    {
-        return interrupter && interrupter->wasInterrupted(percent);
-    }
 };
-
-[[noreturn]] void throwInterrupted()
-{
-    OPENVDB_THROW(openvdb::RuntimeError, "interrupted");
-}
 
 /// World coordinates of the 512 voxels of the leaf at @a origin, in leaf offset order.
 void leafPoints(const Coord& origin, double dx, double* x, double* y, double* z)
@@ -189,62 +182,42 @@ struct Level1Result
 /// Blocks between OpenVDB's 128^3 internal nodes and its 8^3 leaves in the descent.
 constexpr int kBlock = 32;
 
-/// Bytes the rasterizer may allocate: the caller's limit, else 80% of the available memory.
-double memoryBudget(std::uint64_t limit)
+int alignDown(int v, int dim) { return v & ~(dim - 1); }
+
+/// Call @a fn(origin) for every cube of side @a dim (a power of two, at multiples of it) that
+/// overlaps @a box, in x, y, z order.
+template<typename Fn>
+void forEachCube(const CoordBBox& box, int dim, Fn&& fn)
 {
-    const double available = double(util::availableMemory()); // 0 when unknown
-    return limit ? double(limit) : available > 0.0 ? 0.8 * available : 1e18;
+    for (int a = alignDown(box.min().x(), dim); a <= box.max().x(); a += dim)
+        for (int b = alignDown(box.min().y(), dim); b <= box.max().y(); b += dim)
+            for (int c = alignDown(box.min().z(), dim); c <= box.max().z(); c += dim)
+                fn(Coord(a, b, c));
 }
+
+/// The part of the cube of side @a dim at @a origin inside @a region.
+CoordBBox clipped(const Coord& origin, int dim, const CoordBBox& region)
+{
+    CoordBBox b = CoordBBox::createCube(origin, dim);
+    b.intersect(region);
+    return b;
+}
+
+/// A node of the descent: a cube and the shape pruned to it.
+struct Task
+{
+    Coord origin;
+    Implicit::Ptr node;
+};
 
 /// The sparse path's memory, estimated before it allocates: the straddling level-2 nodes are
 /// known; up to 8 of them (evenly spread) count their straddling 128^3 children, and up to 16 of
 /// those count their straddling leaves (interval tests only, no voxels). Refuses, with the
 /// estimate, when the grid would not fit (a voxel size far too small for the shape, typically).
-template<typename TaskT>
-void checkSparseMemory(const Context& ctx, const std::vector<TaskT>& level2)
+void checkSparseMemory(const Context& ctx, const std::vector<Task>& level2)
 {
     if (level2.empty()) return;
-    auto alignDown = [](int v, int dim) { return v & ~(dim - 1); };
     const int d2 = Int2T::DIM, d1 = Int1T::DIM, d0 = LeafT::DIM;
-    const size_t sample2 = std::min<size_t>(level2.size(), 8);
-    double children = 0.0; // straddling level-1 nodes in the sampled level-2 nodes
-    std::vector<std::pair<Coord, const Implicit*>> straddling1;
-    for (size_t s = 0; s < sample2; ++s) {
-        const TaskT& t2 = level2[s * level2.size() / sample2];
-        CoordBBox sub = CoordBBox::createCube(t2.origin, d2);
-        sub.intersect(ctx.region);
-        for (int a = alignDown(sub.min().x(), d1); a <= sub.max().x(); a += d1)
-            for (int b = alignDown(sub.min().y(), d1); b <= sub.max().y(); b += d1)
-                for (int c = alignDown(sub.min().z(), d1); c <= sub.max().z(); c += d1) {
-                    const Coord o(a, b, c);
-                    if (ctx.classify(*t2.node, CoordBBox::createCube(o, d1)) == Verdict::Straddle) {
-                        children += 1.0;
-                        straddling1.emplace_back(o, t2.node.get());
-                    }
-                }
-        if (ctx.interrupted()) throwInterrupted();
-    }
-    const double level1 = children * double(level2.size()) / double(sample2);
-    const size_t sample1 = std::min<size_t>(straddling1.size(), 16);
-    double leaves = 0.0;
-    for (size_t s = 0; s < sample1; ++s) {
-        const auto& [o1, node] = straddling1[s * straddling1.size() / sample1];
-        CoordBBox sub = CoordBBox::createCube(o1, d1);
-        sub.intersect(ctx.region);
-        for (int a = alignDown(sub.min().x(), d0); a <= sub.max().x(); a += d0)
-            for (int b = alignDown(sub.min().y(), d0); b <= sub.max().y(); b += d0)
-                for (int c = alignDown(sub.min().z(), d0); c <= sub.max().z(); c += d0) {
-                    const Coord o(a, b, c);
-                    if (ctx.classify(*node, CoordBBox::createCube(o, d0)) == Verdict::Straddle) {
-                        leaves += 1.0;
-                    }
-                }
-    }
-    const double leafCount = sample1 ? level1 * leaves / double(sample1) : 0.0;
-    // A leaf's values and masks; re-distancing (fast sweeping) holds about two more copies.
-    const double perLeaf = double(sizeof(LeafT) + LeafT::SIZE * sizeof(float)) * (ctx.exact ? 1.0 : 3.0);
-    const double need = leafCount * perLeaf + level1 * double(sizeof(Int1T));
-    const double limit = memoryBudget(ctx.memoryLimit);
     // The level-1 task list itself: 24 bytes per 128^3 node of every straddling 4096^3 node.
     if (double(level2.size()) * double((d2 / d1) * (d2 / d1) * (d2 / d1)) > 2e8) {
         OPENVDB_THROW(openvdb::RuntimeError, "the surface crosses " +
@@ -252,6 +225,33 @@ void checkSparseMemory(const Context& ctx, const std::vector<TaskT>& level2)
             util::formatNumber(ctx.dx) + ", too many to visit: use a larger voxel size or "
             "smaller bounds");
     }
+    const size_t sample2 = std::min<size_t>(level2.size(), 8);
+    std::vector<Task> straddling1; // in the sampled level-2 nodes
+    for (size_t s = 0; s < sample2; ++s) {
+        const Task& t2 = level2[s * level2.size() / sample2];
+        forEachCube(clipped(t2.origin, d2, ctx.region), d1, [&](const Coord& o) {
+            if (ctx.classify(*t2.node, CoordBBox::createCube(o, d1)) == Verdict::Straddle) {
+                straddling1.push_back({o, t2.node});
+            }
+        });
+        util::checkInterrupt(ctx.interrupter);
+    }
+    const double level1 = double(straddling1.size()) * double(level2.size()) / double(sample2);
+    const size_t sample1 = std::min<size_t>(straddling1.size(), 16);
+    double leaves = 0.0;
+    for (size_t s = 0; s < sample1; ++s) {
+        const Task& t1 = straddling1[s * straddling1.size() / sample1];
+        forEachCube(clipped(t1.origin, d1, ctx.region), d0, [&](const Coord& o) {
+            if (ctx.classify(*t1.node, CoordBBox::createCube(o, d0)) == Verdict::Straddle) {
+                leaves += 1.0;
+            }
+        });
+    }
+    const double leafCount = sample1 ? level1 * leaves / double(sample1) : 0.0;
+    // A leaf's values and masks; re-distancing (fast sweeping) holds about two more copies.
+    const double perLeaf = double(sizeof(LeafT) + LeafT::SIZE * sizeof(float)) * (ctx.exact ? 1.0 : 3.0);
+    const double need = leafCount * perLeaf + level1 * double(sizeof(Int1T));
+    const double limit = util::memoryBudget(ctx.memoryLimit);
     if (need > limit) {
         std::ostringstream os;
         os << "the narrow band at voxel size " << util::formatNumber(ctx.dx) << " would need about "
@@ -263,131 +263,73 @@ void checkSparseMemory(const Context& ctx, const std::vector<TaskT>& level2)
     }
 }
 
-/// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels), with 32^3
-/// blocks between the last two.
-openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
+/// The leaves (or inside tiles) of one 32^3 block into @a int1: @a node is the shape pruned to
+/// the block, null when the whole block is inside. Returns true if it added anything.
+bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Implicit* node)
 {
-    const float bg = static_cast<float>(ctx.band);
-    auto grid = openvdb::FloatGrid::create(bg);
-    grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
-    FloatTree& tree = grid->tree();
-    const Implicit& shape = *ctx.shape;
-
-    auto alignDown = [](int v, int dim) { return v & ~(dim - 1); };
-
-    // Level 2 (4096^3): few nodes, serial.
-    struct Task { Coord origin; Implicit::Ptr node; };
-    std::vector<Task> straddling2;
-    std::vector<Coord> insideLevel2;
-    const CoordBBox& reg = ctx.region;
-    const int d2 = Int2T::DIM, d1 = Int1T::DIM;
-    for (int i = alignDown(reg.min().x(), d2); i <= reg.max().x(); i += d2) {
-        for (int j = alignDown(reg.min().y(), d2); j <= reg.max().y(); j += d2) {
-            for (int k = alignDown(reg.min().z(), d2); k <= reg.max().z(); k += d2) {
-                const CoordBBox box2 = CoordBBox::createCube(Coord(i, j, k), d2);
-                const Verdict v = ctx.classify(shape, box2);
-                if (v == Verdict::Outside) continue;
-                if (v == Verdict::Inside) {
-                    insideLevel2.push_back(box2.min());
-                    continue;
+    bool any = false;
+    const int d0 = LeafT::DIM;
+    forEachCube(part, d0, [&](const Coord& o) {
+        bool inside = node == nullptr;
+        if (node) {
+            const CoordBBox box0 = CoordBBox::createCube(o, d0);
+            const Verdict v0 = ctx.classify(*node, box0);
+            inside = v0 == Verdict::Inside;
+            if (v0 == Verdict::Straddle) {
+                const Implicit::Ptr node0 = node->prune(ctx.dilatedWorldBox(box0));
+                if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside)) {
+                    int1.addLeaf(leaf);
+                    any = true;
+                    return;
                 }
-                straddling2.push_back({box2.min(), shape.prune(ctx.dilatedWorldBox(box2))});
             }
         }
-        if (ctx.interrupted(0)) throwInterrupted();
-    }
-    checkSparseMemory(ctx, straddling2);
-    // Level-1 children of each straddling level-2 node that overlap the region.
-    std::vector<Task> tasks;
-    for (const Task& t2 : straddling2) {
-        CoordBBox sub = CoordBBox::createCube(t2.origin, d2);
-        sub.intersect(reg);
-        for (int a = alignDown(sub.min().x(), d1); a <= sub.max().x(); a += d1)
-            for (int b = alignDown(sub.min().y(), d1); b <= sub.max().y(); b += d1)
-                for (int c = alignDown(sub.min().z(), d1); c <= sub.max().z(); c += d1)
-                    tasks.push_back({Coord(a, b, c), t2.node});
-    }
-    if (ctx.interrupted(0)) throwInterrupted();
-
-    // Level 1 (128^3) in parallel: each task builds a whole internal node of leaves.
-    std::vector<Level1Result> results(tasks.size());
-    std::atomic<size_t> done{0};
-    std::atomic<bool> cancelled{false};
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, tasks.size(), 1),
-        [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t t = r.begin(); t != r.end(); ++t) {
-            if (cancelled) return;
-            const Task& task = tasks[t];
-            Level1Result& res = results[t];
-            res.origin = task.origin;
-            const CoordBBox box1 = CoordBBox::createCube(task.origin, d1);
-            const Verdict v1 = ctx.classify(*task.node, box1);
-            if (v1 == Verdict::Inside) res.inside = true;
-            if (v1 != Verdict::Straddle) continue;
-            const Implicit::Ptr node1 = task.node->prune(ctx.dilatedWorldBox(box1));
-            auto int1 = std::make_unique<Int1T>(task.origin, bg);
-            bool any = false;
-            CoordBBox sub = box1;
-            sub.intersect(ctx.region);
-            const int d0 = LeafT::DIM;
-            // The leaves of one block (a straddling one, or one inside: tiles only).
-            auto leavesOf = [&](const CoordBBox& block, const Implicit* node, bool blockInside) {
-                CoordBBox part = block;
-                part.intersect(sub);
-                for (int a = alignDown(part.min().x(), d0); a <= part.max().x(); a += d0) {
-                    for (int b = alignDown(part.min().y(), d0); b <= part.max().y(); b += d0) {
-                        for (int c = alignDown(part.min().z(), d0); c <= part.max().z(); c += d0) {
-                            const Coord o(a, b, c);
-                            bool inside = blockInside;
-                            if (!blockInside) {
-                                const CoordBBox box0 = CoordBBox::createCube(o, d0);
-                                const Verdict v0 = ctx.classify(*node, box0);
-                                inside = v0 == Verdict::Inside;
-                                if (v0 == Verdict::Straddle) {
-                                    const Implicit::Ptr node0 = node->prune(ctx.dilatedWorldBox(box0));
-                                    if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside)) {
-                                        int1->addLeaf(leaf);
-                                        any = true;
-                                        continue;
-                                    }
-                                }
-                            }
-                            if (inside) {
-                                int1->addTile(int1->coordToOffset(o), -bg, false);
-                                any = true;
-                            }
-                        }
-                    }
-                }
-            };
-            // Blocks of 4^3 leaves in between: a leaf then tests the few primitives near its
-            // block instead of the hundreds near its 128^3 node (1000 spheres: ~3x faster).
-            for (int a = alignDown(sub.min().x(), kBlock); a <= sub.max().x(); a += kBlock) {
-                for (int b = alignDown(sub.min().y(), kBlock); b <= sub.max().y(); b += kBlock) {
-                    for (int c = alignDown(sub.min().z(), kBlock); c <= sub.max().z(); c += kBlock) {
-                        const CoordBBox block = CoordBBox::createCube(Coord(a, b, c), kBlock);
-                        const Verdict vb = ctx.classify(*node1, block);
-                        if (vb == Verdict::Outside) continue;
-                        if (vb == Verdict::Inside) {
-                            leavesOf(block, nullptr, true);
-                            continue;
-                        }
-                        const Implicit::Ptr nodeB = node1->prune(ctx.dilatedWorldBox(block));
-                        leavesOf(block, nodeB.get(), false);
-                    }
-                }
-            }
-            if (any) res.node = int1.release();
-            const size_t n = ++done;
-            if (ctx.interrupter && ctx.interrupted(int(100 * n / tasks.size()))) cancelled = true;
+        if (inside) {
+            int1.addTile(int1.coordToOffset(o), -static_cast<float>(ctx.band), false);
+            any = true;
         }
     });
-    if (cancelled) {
-        for (auto& r : results) delete r.node;
-        throwInterrupted();
-    }
+    return any;
+}
 
-    // Assemble: level-1 nodes into their level-2 parents, those into the root.
+/// One 128^3 node of the sparse path: its 32^3 blocks, then their leaves.
+Level1Result buildLevel1(const Context& ctx, const Task& task)
+{
+    Level1Result res;
+    res.origin = task.origin;
+    const int d1 = Int1T::DIM;
+    const CoordBBox box1 = CoordBBox::createCube(task.origin, d1);
+    const Verdict v1 = ctx.classify(*task.node, box1);
+    res.inside = v1 == Verdict::Inside;
+    if (v1 != Verdict::Straddle) return res;
+    const Implicit::Ptr node1 = task.node->prune(ctx.dilatedWorldBox(box1));
+    auto int1 = std::make_unique<Int1T>(task.origin, static_cast<float>(ctx.band));
+    const CoordBBox sub = clipped(task.origin, d1, ctx.region);
+    bool any = false;
+    // Blocks of 4^3 leaves in between: a leaf then tests the few primitives near its block
+    // instead of the hundreds near its 128^3 node (1000 spheres: ~3x faster).
+    forEachCube(sub, kBlock, [&](const Coord& o) {
+        const CoordBBox block = CoordBBox::createCube(o, kBlock);
+        const Verdict vb = ctx.classify(*node1, block);
+        if (vb == Verdict::Outside) return;
+        CoordBBox part = block;
+        part.intersect(sub);
+        if (vb == Verdict::Inside) {
+            any = fillBlock(ctx, *int1, part, nullptr) || any;
+            return;
+        }
+        const Implicit::Ptr nodeB = node1->prune(ctx.dilatedWorldBox(block));
+        any = fillBlock(ctx, *int1, part, nodeB.get()) || any;
+    });
+    if (any) res.node = int1.release();
+    return res;
+}
+
+/// Level-1 nodes into their level-2 parents, those (and inside level-2 tiles) into the root.
+void assembleTree(FloatTree& tree, std::vector<Level1Result>& results,
+                  const std::vector<Coord>& insideLevel2, float bg)
+{
+    const int d2 = Int2T::DIM;
     std::map<Coord, std::unique_ptr<Int2T>> level2;
     for (auto& r : results) {
         if (!r.node && !r.inside) continue;
@@ -397,148 +339,250 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
         if (!parent) parent = std::make_unique<Int2T>(o2, bg);
         if (r.node) {
             parent->addChild(r.node);
+            r.node = nullptr;
         } else {
             parent->addTile(parent->coordToOffset(r.origin), -bg, false);
         }
     }
     for (auto& [o2, node] : level2) tree.root().addChild(node.release());
     for (const Coord& o2 : insideLevel2) tree.root().addTile(o2, -bg, false);
+}
+
+/// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels), with 32^3
+/// blocks between the last two.
+openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
+{
+    const float bg = static_cast<float>(ctx.band);
+    auto grid = openvdb::FloatGrid::create(bg);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
+    const int d2 = Int2T::DIM, d1 = Int1T::DIM;
+
+    // Level 2 (4096^3): few nodes, serial.
+    std::vector<Task> straddling2;
+    std::vector<Coord> insideLevel2;
+    forEachCube(ctx.region, d2, [&](const Coord& o) {
+        const CoordBBox box2 = CoordBBox::createCube(o, d2);
+        const Verdict v = ctx.classify(*ctx.shape, box2);
+        if (v == Verdict::Inside) insideLevel2.push_back(o);
+        if (v == Verdict::Straddle) straddling2.push_back({o, ctx.shape->prune(ctx.dilatedWorldBox(box2))});
+    });
+    util::checkInterrupt(ctx.interrupter, 0);
+    checkSparseMemory(ctx, straddling2);
+    // Level-1 children of each straddling level-2 node that overlap the region.
+    std::vector<Task> tasks;
+    for (const Task& t2 : straddling2) {
+        forEachCube(clipped(t2.origin, d2, ctx.region), d1,
+                    [&](const Coord& o) { tasks.push_back({o, t2.node}); });
+    }
+    util::checkInterrupt(ctx.interrupter, 0);
+
+    // Level 1 (128^3) in parallel: each task builds a whole internal node of leaves.
+    std::vector<Level1Result> results(tasks.size());
+    std::atomic<size_t> done{0};
+    std::atomic<bool> cancelled{false};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, tasks.size(), 1),
+        [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t t = r.begin(); t != r.end(); ++t) {
+            if (cancelled) return;
+            results[t] = buildLevel1(ctx, tasks[t]);
+            const size_t n = ++done;
+            if (util::wasInterrupted(ctx.interrupter, int(100 * n / tasks.size()))) cancelled = true;
+        }
+    });
+    if (cancelled) {
+        for (auto& r : results) delete r.node;
+        util::throwInterrupted();
+    }
+    assembleTree(grid->tree(), results, insideLevel2, bg);
     return grid;
+}
+
+/// The dense path's samples: every voxel of the region, in x-major order.
+class DenseSamples
+{
+public:
+    explicit DenseSamples(const CoordBBox& region)
+        : mMin(region.min()), mNy(std::uint64_t(region.dim().y())), mNz(std::uint64_t(region.dim().z()))
+    {
+        const std::uint64_t nx = std::uint64_t(region.dim().x());
+        // The caller checked the estimate against memory. Not zero-filled: sample() writes
+        // every value, so the pages are first touched there, in parallel and interruptibly
+        // (a serial fill of 2 GB took seconds and ignored Ctrl-C).
+        mData.reset(new float[nx * mNy * mNz]);
+    }
+
+    float at(int i, int j, int k) const
+    {
+        return mData[(std::uint64_t(i - mMin.x()) * mNy + std::uint64_t(j - mMin.y())) * mNz +
+                     std::uint64_t(k - mMin.z())];
+    }
+
+    /// Evaluate the shape at every voxel, rows of z in batches, in parallel.
+    void sample(const Context& ctx)
+    {
+        const std::uint64_t rowsTotal = std::uint64_t(ctx.region.dim().x()) * mNy;
+        std::atomic<bool> cancelled{false};
+        std::atomic<std::uint64_t> rows{0};
+        tbb::parallel_for(tbb::blocked_range<std::uint64_t>(0, rowsTotal, 16),
+            [&](const tbb::blocked_range<std::uint64_t>& r) {
+            if (cancelled) return;
+            alignas(64) double x[implicit::kMaxBatch], y[implicit::kMaxBatch],
+                z[implicit::kMaxBatch], v[implicit::kMaxBatch];
+            for (std::uint64_t row = r.begin(); row != r.end(); ++row) {
+                const int i = mMin.x() + int(row / mNy), j = mMin.y() + int(row % mNy);
+                float* out = mData.get() + row * mNz;
+                for (std::uint64_t k0 = 0; k0 < mNz; k0 += implicit::kMaxBatch) {
+                    const std::size_t n = std::size_t(std::min<std::uint64_t>(implicit::kMaxBatch, mNz - k0));
+                    for (std::size_t m = 0; m < n; ++m) {
+                        x[m] = double(i) * ctx.dx;
+                        y[m] = double(j) * ctx.dx;
+                        z[m] = double(mMin.z() + int(k0 + m)) * ctx.dx;
+                    }
+                    ctx.shape->values(x, y, z, v, n);
+                    for (std::size_t m = 0; m < n; ++m) out[k0 + m] = static_cast<float>(v[m]);
+                }
+            }
+            const std::uint64_t done = rows += r.size();
+            if (util::wasInterrupted(ctx.interrupter, int(90 * done / rowsTotal))) cancelled = true;
+        });
+        if (cancelled) util::throwInterrupted();
+    }
+
+    void release() { mData.reset(); }
+
+private:
+    Coord mMin;
+    std::uint64_t mNy, mNz;
+    std::unique_ptr<float[]> mData;
+};
+
+/// The leaf-sized blocks of the dense region, x-major.
+struct BlockGrid
+{
+    Coord min, count;
+
+    explicit BlockGrid(const CoordBBox& reg)
+    {
+        const int d0 = LeafT::DIM;
+        min = Coord(alignDown(reg.min().x(), d0), alignDown(reg.min().y(), d0),
+                    alignDown(reg.min().z(), d0));
+        count = Coord((reg.max().x() - min.x()) / d0 + 1, (reg.max().y() - min.y()) / d0 + 1,
+                      (reg.max().z() - min.z()) / d0 + 1);
+    }
+    std::size_t size() const { return std::size_t(count.x()) * count.y() * count.z(); }
+    std::size_t index(int bi, int bj, int bk) const
+    {
+        return (std::size_t(bi) * count.y() + bj) * count.z() + bk;
+    }
+    Coord origin(std::size_t b) const
+    {
+        const int d0 = LeafT::DIM;
+        const int bi = int(b / (std::size_t(count.y()) * count.z()));
+        const int bj = int((b / count.z()) % count.y());
+        const int bk = int(b % count.z());
+        return Coord(min.x() + bi * d0, min.y() + bj * d0, min.z() + bk * d0);
+    }
+};
+
+/// Which leaf-sized blocks the result needs: exact shapes, those with a band voxel; others,
+/// those with a sign change to a face neighbour, grown by the re-distancing's reach.
+std::vector<std::uint8_t> neededBlocks(const Context& ctx, const DenseSamples& samples,
+                                       const BlockGrid& blocks)
+{
+    const CoordBBox& reg = ctx.region;
+    const int d0 = LeafT::DIM;
+    auto inRegion = [&](int i, int j, int k) { return reg.isInside(Coord(i, j, k)); };
+    std::vector<std::uint8_t> needed(blocks.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<int>(0, blocks.count.x()), [&](const tbb::blocked_range<int>& r) {
+        for (int bi = r.begin(); bi != r.end(); ++bi)
+        for (int bj = 0; bj < blocks.count.y(); ++bj)
+        for (int bk = 0; bk < blocks.count.z(); ++bk) {
+            bool need = false;
+            for (int i = 0; i < d0 && !need; ++i)
+            for (int j = 0; j < d0 && !need; ++j)
+            for (int k = 0; k < d0 && !need; ++k) {
+                const int x = blocks.min.x() + bi * d0 + i, y = blocks.min.y() + bj * d0 + j,
+                          z = blocks.min.z() + bk * d0 + k;
+                if (!inRegion(x, y, z)) continue;
+                const float v = samples.at(x, y, z);
+                if (ctx.exact) {
+                    need = ctx.inBand(v);
+                    continue;
+                }
+                // A sign change to a face neighbour marks an interface voxel.
+                const bool s = v > 0.0f;
+                auto differs = [&](int a, int b, int c) {
+                    return inRegion(a, b, c) && (samples.at(a, b, c) > 0.0f) != s;
+                };
+                need = differs(x + 1, y, z) || differs(x - 1, y, z) || differs(x, y + 1, z) ||
+                       differs(x, y - 1, z) || differs(x, y, z + 1) || differs(x, y, z - 1);
+            }
+            needed[blocks.index(bi, bj, bk)] = need ? 1 : 0;
+        }
+    });
+    if (ctx.exact) return needed;
+    // Re-distancing needs every voxel within sweepSteps (+1 for its stencil) of the interface.
+    const int nb = (ctx.sweepSteps + 1 + d0 - 1) / d0;
+    std::vector<std::uint8_t> grown(blocks.size(), 0);
+    for (int bi = 0; bi < blocks.count.x(); ++bi)
+    for (int bj = 0; bj < blocks.count.y(); ++bj)
+    for (int bk = 0; bk < blocks.count.z(); ++bk) {
+        if (!needed[blocks.index(bi, bj, bk)]) continue;
+        for (int a = std::max(0, bi - nb); a <= std::min(blocks.count.x() - 1, bi + nb); ++a)
+        for (int b = std::max(0, bj - nb); b <= std::min(blocks.count.y() - 1, bj + nb); ++b)
+        for (int c = std::max(0, bk - nb); c <= std::min(blocks.count.z() - 1, bk + nb); ++c)
+            grown[blocks.index(a, b, c)] = 1;
+    }
+    return grown;
+}
+
+/// A dense-path leaf at @a o from the samples (or the shape, beyond the region), by the same
+/// band rule as buildLeaf().
+LeafT* denseLeaf(const Context& ctx, const DenseSamples& samples, const Coord& o)
+{
+    const float bg = static_cast<float>(ctx.band);
+    const int d0 = LeafT::DIM;
+    auto leaf = new LeafT(o, bg);
+    float* buf = leaf->buffer().data();
+    for (int i = 0, n = 0; i < d0; ++i)
+    for (int j = 0; j < d0; ++j)
+    for (int k = 0; k < d0; ++k, ++n) {
+        const int x = o.x() + i, y = o.y() + j, z = o.z() + k;
+        const Vec3d p(double(x) * ctx.dx, double(y) * ctx.dx, double(z) * ctx.dx);
+        if (ctx.exact) {
+            const float v = ctx.region.isInside(Coord(x, y, z))
+                                ? samples.at(x, y, z) : static_cast<float>(ctx.shape->value(p));
+            if (ctx.inBand(v)) {
+                buf[n] = v;
+                leaf->setValueOn(n);
+            } else {
+                buf[n] = v > 0.0f ? bg : -bg;
+            }
+        } else {
+            buf[n] = ctx.estimate(*ctx.shape, ctx.shape->value(p), p);
+            leaf->setValueOn(n);
+        }
+    }
+    return leaf;
 }
 
 /// Dense path: sample every voxel of the region into an array, then build the same grid.
 openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
 {
-    const float bg = static_cast<float>(ctx.band);
-    const CoordBBox& reg = ctx.region;
-    const Coord dim = reg.dim();
-    const std::uint64_t nx = dim.x(), ny = dim.y(), nz = dim.z();
-    const std::uint64_t count = nx * ny * nz;
-    // The caller checked the estimate against memory. Not zero-filled: the parallel loop below
-    // writes every sample, so the pages are first touched there, in parallel and interruptibly
-    // (a serial fill of 2 GB took seconds and ignored Ctrl-C).
-    std::unique_ptr<float[]> samples(new float[count]);
-
-    const Implicit& shape = *ctx.shape;
-    std::atomic<bool> cancelled{false};
-    std::atomic<std::uint64_t> rows{0};
-    tbb::parallel_for(tbb::blocked_range<std::uint64_t>(0, nx * ny, 16),
-        [&](const tbb::blocked_range<std::uint64_t>& r) {
-        if (cancelled) return;
-        alignas(64) double x[implicit::kMaxBatch], y[implicit::kMaxBatch],
-            z[implicit::kMaxBatch], v[implicit::kMaxBatch];
-        for (std::uint64_t row = r.begin(); row != r.end(); ++row) {
-            const int i = reg.min().x() + int(row / ny), j = reg.min().y() + int(row % ny);
-            float* out = samples.get() + row * nz;
-            for (std::uint64_t k0 = 0; k0 < nz; k0 += implicit::kMaxBatch) {
-                const std::size_t n = std::size_t(std::min<std::uint64_t>(implicit::kMaxBatch, nz - k0));
-                for (std::size_t m = 0; m < n; ++m) {
-                    x[m] = double(i) * ctx.dx;
-                    y[m] = double(j) * ctx.dx;
-                    z[m] = double(reg.min().z() + int(k0 + m)) * ctx.dx;
-                }
-                shape.values(x, y, z, v, n);
-                for (std::size_t m = 0; m < n; ++m) out[k0 + m] = static_cast<float>(v[m]);
-            }
-        }
-        const std::uint64_t done = rows += r.size();
-        if (ctx.interrupter && ctx.interrupted(int(90 * done / (nx * ny)))) cancelled = true;
-    });
-    if (cancelled) throwInterrupted();
-
-    auto at = [&](int i, int j, int k) -> float {
-        return samples[(std::uint64_t(i - reg.min().x()) * ny + std::uint64_t(j - reg.min().y())) * nz +
-                       std::uint64_t(k - reg.min().z())];
-    };
-    auto inRegion = [&](int i, int j, int k) { return reg.isInside(Coord(i, j, k)); };
-
-    // Leaf-sized blocks that the result needs.
-    const int d0 = LeafT::DIM;
-    const Coord bmin(reg.min().x() & ~(d0 - 1), reg.min().y() & ~(d0 - 1), reg.min().z() & ~(d0 - 1));
-    const Coord bcount((reg.max().x() - bmin.x()) / d0 + 1, (reg.max().y() - bmin.y()) / d0 + 1,
-                       (reg.max().z() - bmin.z()) / d0 + 1);
-    const std::size_t nblocks = std::size_t(bcount.x()) * bcount.y() * bcount.z();
-    std::vector<std::uint8_t> needed(nblocks, 0);
-    auto blockIndex = [&](int bi, int bj, int bk) {
-        return (std::size_t(bi) * bcount.y() + bj) * bcount.z() + bk;
-    };
-    tbb::parallel_for(tbb::blocked_range<int>(0, bcount.x()), [&](const tbb::blocked_range<int>& r) {
-        for (int bi = r.begin(); bi != r.end(); ++bi)
-        for (int bj = 0; bj < bcount.y(); ++bj)
-        for (int bk = 0; bk < bcount.z(); ++bk) {
-            bool need = false;
-            for (int i = 0; i < d0 && !need; ++i)
-            for (int j = 0; j < d0 && !need; ++j)
-            for (int k = 0; k < d0 && !need; ++k) {
-                const int x = bmin.x() + bi * d0 + i, y = bmin.y() + bj * d0 + j,
-                          z = bmin.z() + bk * d0 + k;
-                if (!inRegion(x, y, z)) continue;
-                const float v = at(x, y, z);
-                if (ctx.exact) {
-                    need = ctx.inBand(v);
-                } else {
-                    // A sign change to a face neighbour marks an interface voxel.
-                    const bool s = v > 0.0f;
-                    need = (inRegion(x + 1, y, z) && (at(x + 1, y, z) > 0.0f) != s) ||
-                           (inRegion(x - 1, y, z) && (at(x - 1, y, z) > 0.0f) != s) ||
-                           (inRegion(x, y + 1, z) && (at(x, y + 1, z) > 0.0f) != s) ||
-                           (inRegion(x, y - 1, z) && (at(x, y - 1, z) > 0.0f) != s) ||
-                           (inRegion(x, y, z + 1) && (at(x, y, z + 1) > 0.0f) != s) ||
-                           (inRegion(x, y, z - 1) && (at(x, y, z - 1) > 0.0f) != s);
-                }
-            }
-            needed[blockIndex(bi, bj, bk)] = need ? 1 : 0;
-        }
-    });
-    if (!ctx.exact) {
-        // Re-distancing needs every voxel within sweepSteps (+1 for its stencil) of the interface.
-        const int nb = (ctx.sweepSteps + 1 + d0 - 1) / d0;
-        std::vector<std::uint8_t> grown(nblocks, 0);
-        for (int bi = 0; bi < bcount.x(); ++bi)
-        for (int bj = 0; bj < bcount.y(); ++bj)
-        for (int bk = 0; bk < bcount.z(); ++bk) {
-            if (!needed[blockIndex(bi, bj, bk)]) continue;
-            for (int a = std::max(0, bi - nb); a <= std::min(bcount.x() - 1, bi + nb); ++a)
-            for (int b = std::max(0, bj - nb); b <= std::min(bcount.y() - 1, bj + nb); ++b)
-            for (int c = std::max(0, bk - nb); c <= std::min(bcount.z() - 1, bk + nb); ++c)
-                grown[blockIndex(a, b, c)] = 1;
-        }
-        needed.swap(grown);
-    }
-
-    std::vector<LeafT*> leaves(nblocks, nullptr);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nblocks), [&](const tbb::blocked_range<std::size_t>& r) {
+    DenseSamples samples(ctx.region);
+    samples.sample(ctx);
+    const BlockGrid blocks(ctx.region);
+    const std::vector<std::uint8_t> needed = neededBlocks(ctx, samples, blocks);
+    std::vector<LeafT*> leaves(blocks.size(), nullptr);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            if (!needed[b]) continue;
-            const int bi = int(b / (std::size_t(bcount.y()) * bcount.z()));
-            const int bj = int((b / bcount.z()) % bcount.y());
-            const int bk = int(b % bcount.z());
-            const Coord o(bmin.x() + bi * d0, bmin.y() + bj * d0, bmin.z() + bk * d0);
-            auto leaf = new LeafT(o, bg);
-            float* buf = leaf->buffer().data();
-            for (int i = 0, n = 0; i < d0; ++i)
-            for (int j = 0; j < d0; ++j)
-            for (int k = 0; k < d0; ++k, ++n) {
-                const int x = o.x() + i, y = o.y() + j, z = o.z() + k;
-                const Vec3d p(double(x) * ctx.dx, double(y) * ctx.dx, double(z) * ctx.dx);
-                if (ctx.exact) {
-                    const float v = inRegion(x, y, z) ? at(x, y, z) : static_cast<float>(shape.value(p));
-                    if (ctx.inBand(v)) {
-                        buf[n] = v;
-                        leaf->setValueOn(n);
-                    } else {
-                        buf[n] = v > 0.0f ? bg : -bg;
-                    }
-                } else {
-                    buf[n] = ctx.estimate(shape, shape.value(p), p);
-                    leaf->setValueOn(n);
-                }
-            }
-            leaves[b] = leaf;
+            if (needed[b]) leaves[b] = denseLeaf(ctx, samples, blocks.origin(b));
         }
     });
-    samples.reset();
+    samples.release();
 
+    const float bg = static_cast<float>(ctx.band);
     auto grid = openvdb::FloatGrid::create(bg);
     grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
     openvdb::tree::ValueAccessor<FloatTree> acc(grid->tree());
@@ -577,22 +621,14 @@ namespace {
 Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
 {
     if (!shape) OPENVDB_THROW(openvdb::ValueError, "no shape to rasterize");
-    if (!(s.voxelSize > 0.0) || !std::isfinite(s.voxelSize)) {
-        std::ostringstream os;
-        os << "voxel size must be > 0 and finite, got " << s.voxelSize;
-        OPENVDB_THROW(openvdb::ValueError, os.str());
-    }
+    check(limits::kVoxelSize, s.voxelSize);
     // OpenVDB's linear transforms refuse a scale whose determinant is below 3e-15.
     if (s.voxelSize * s.voxelSize * s.voxelSize < 3.0 * openvdb::math::Tolerance<double>::value()) {
-        OPENVDB_THROW(openvdb::ValueError, "voxel size " + util::formatNumber(s.voxelSize) +
-            " is below 1.45e-05, the smallest OpenVDB's transforms accept: scale the scene up "
-            "(a \"transform\" with \"scale\") and use a larger voxel size");
+        throw ParamError(param::kVoxelSize, util::formatNumber(s.voxelSize) + " is below "
+            "1.45e-05, the smallest OpenVDB's transforms accept: scale the scene up (a "
+            "\"transform\" with \"scale\") and use a larger voxel size");
     }
-    if (!(s.halfWidth >= 1.0 && s.halfWidth <= kMaxHalfWidth)) {
-        std::ostringstream os;
-        os << "half width must be in [1, " << kMaxHalfWidth << "] voxels, got " << s.halfWidth;
-        OPENVDB_THROW(openvdb::ValueError, os.str());
-    }
+    check(limits::kHalfWidth, s.halfWidth);
     Context ctx;
     ctx.shape = clipToBounds(shape, s);
     if (!ctx.shape->isBounded()) {
@@ -677,25 +713,25 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
         const Coord d = ctx.region.dim();
         // In double: the product of three dimensions of up to 2^31 voxels overflows 64 bits.
         const double need = double(d.x()) * double(d.y()) * double(d.z()) * sizeof(float);
-        const double limit = memoryBudget(settings.memoryLimit);
+        const double limit = util::memoryBudget(settings.memoryLimit);
         if (need > limit) {
             std::ostringstream os;
             os << "dense sampling of " << d.x() << " x " << d.y() << " x " << d.z()
                << " voxels needs about " << util::formatBytes(need) << " but only "
                << util::formatBytes(limit)
-               << " may be used: use --sampling sparse, a larger voxel size or smaller bounds";
+               << " may be used: use sparse sampling, a larger voxel size or smaller bounds";
             OPENVDB_THROW(openvdb::RuntimeError, os.str());
         }
     }
 
     auto run = [&]() {
-        if (ctx.interrupter) ctx.interrupter->start("Rasterizing");
+        util::InterruptScope scope(ctx.interrupter, "Rasterizing");
         openvdb::FloatGrid::Ptr grid = settings.sampling == Sampling::Dense
                                            ? sampleDense(ctx)
                                            : sampleSparse(ctx);
         if (!ctx.exact) grid = levelset::redistance(*grid, ctx.halfWidthVox, ctx.interrupter);
         openvdb::tools::pruneLevelSet(grid->tree());
-        if (ctx.interrupter) ctx.interrupter->end();
+        scope.end();
         return grid;
     };
     openvdb::FloatGrid::Ptr grid;

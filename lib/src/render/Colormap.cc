@@ -1,4 +1,7 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/render/Colormap.h>
+
+#include <ivdb/util/Params.h>
 
 #include "ColormapTables.h"
 
@@ -21,8 +24,8 @@ Colormap::Colormap(const std::string& name): mName(name)
     else if (name == "viridis") mTable = detail::kViridis;
     else if (name == "coolwarm") mTable = detail::kCoolwarm;
     else if (name != "gray") {
-        OPENVDB_THROW(openvdb::ValueError,
-                      "unknown colormap '" + name + "': use hsv, viridis, coolwarm or gray");
+        throw ParamError(param::kColormap, "'" + name + "' is unknown: use hsv, viridis, "
+                         "coolwarm or gray");
     }
 }
 
@@ -34,6 +37,13 @@ openvdb::Vec3f Colormap::at(double t) const
     const int i = std::min(int(t * detail::kEntries), detail::kEntries - 1);
     if (!mTable) return openvdb::Vec3f(float(i) / float(detail::kEntries - 1));
     return openvdb::Vec3f(mTable[i][0], mTable[i][1], mTable[i][2]);
+}
+
+openvdb::Vec3f directionColor(const openvdb::Vec3d& v)
+{
+    const double len = v.length();
+    const openvdb::Vec3d n = len > 0.0 ? v / len : openvdb::Vec3d(0.0);
+    return openvdb::Vec3f(n * 0.5 + openvdb::Vec3d(0.5));
 }
 
 } // namespace ivdb::render

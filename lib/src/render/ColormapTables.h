@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Colormap tables: matplotlib's own 256-entry lookup tables (matplotlib 3.6, Debian's
 // python3-matplotlib), which it indexes with min(int(t * 256), 255). Generated once with:
 //   matplotlib.colormaps[name](i / 255) for i in 0..255

@@ -1,8 +1,12 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/render/Render.h>
 
-#include <ivdb/io/VdbFile.h>
+#include <ivdb/io/AtomicFile.h>
+#include <ivdb/util/Params.h>
+#include <ivdb/util/System.h>
 
 #include <openvdb/math/Ray.h>
+#include <openvdb/tools/Count.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/RayIntersector.h>
 
@@ -52,12 +56,32 @@ Camera frameGrid(const openvdb::FloatGrid& grid, int width, int height, double f
     return cam;
 }
 
+void checkImageSize(int width, int height)
+{
+    const std::string size = std::to_string(width) + "x" + std::to_string(height);
+    if (!limits::kImageSide.contains(width) || !limits::kImageSide.contains(height)) {
+        throw ParamError(param::kImageSize, "must be WxH with each in [1, 16384] pixels, got " + size);
+    }
+    // The image's buffers (colour, alpha, depth, normal) and the encoder's copy.
+    const double need = double(width) * double(height) * 48.0;
+    const double limit = util::memoryBudget();
+    if (need > limit) {
+        throw ParamError(param::kImageSize, size + " needs about " + util::formatBytes(need) +
+                         " but only " + util::formatBytes(limit) + " may be used: use a smaller "
+                         "size");
+    }
+}
+
+std::pair<double, double> valueRange(const openvdb::FloatGrid& grid)
+{
+    const auto mm = openvdb::tools::minMax(grid.tree());
+    const double lo = mm.min();
+    return {lo, mm.max() > mm.min() ? double(mm.max()) : lo + 1.0};
+}
+
 Image renderLevelSet(const openvdb::FloatGrid& grid, const RenderSettings& s)
 {
-    if (s.width < 1 || s.height < 1 || s.width > 16384 || s.height > 16384) {
-        OPENVDB_THROW(openvdb::ValueError, "image size must be in [1, 16384] pixels each way, got " +
-                      std::to_string(s.width) + "x" + std::to_string(s.height));
-    }
+    checkImageSize(s.width, s.height);
     const Vec3d forward = s.camera.target - s.camera.eye;
     if (!(forward.length() > 0.0) || !(s.camera.fov > 0.0 && s.camera.fov < 180.0)) {
         OPENVDB_THROW(openvdb::ValueError,
@@ -101,9 +125,7 @@ Image renderLevelSet(const openvdb::FloatGrid& grid, const RenderSettings& s)
                 if (scalar) {
                     base = s.colormap->map(scalar->wsSample(hit), s.lo, s.hi);
                 } else if (vector) {
-                    openvdb::Vec3s v = vector->wsSample(hit);
-                    if (v.length() > 0.0f) v.normalize();
-                    base = v * 0.5f + openvdb::Vec3s(0.5f);
+                    base = directionColor(openvdb::Vec3d(vector->wsSample(hit)));
                 }
                 const double lambert = std::max(0.0, nml.dot(light));
                 const double viewFacing = std::abs(nml.dot(dir)); // a little headlight

@@ -1,16 +1,18 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/scene/Scene.h>
 
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
-#include <ivdb/raster/Rasterize.h>
+#include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/Exceptions.h>
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <functional>
@@ -86,6 +88,14 @@ public:
             fail(childPath(key), "is missing (an array of 3 numbers)");
         }
         return toVec3(raw(key), childPath(key));
+    }
+
+    /// A number that @a limit accepts.
+    double limited(const std::string& key, const Limit& limit)
+    {
+        const double v = number(key);
+        if (!limit.contains(v)) fail(childPath(key), limit.reason(v));
+        return v;
     }
 
     Vec3d positiveVec3(const std::string& key, std::optional<Vec3d> def = std::nullopt)
@@ -214,6 +224,148 @@ implicit::Mat4 parseMatrix(ObjectReader& r)
     return q;
 }
 
+/// A direction: three numbers, not all zero.
+Vec3d axis(ObjectReader& r, const std::string& key, std::optional<Vec3d> def)
+{
+    const Vec3d a = r.vec3(key, def);
+    if (a.length() == 0.0) r.fail(r.childPath(key), "must be non-zero, got [0, 0, 0]");
+    return a;
+}
+
+const Vec3d kZero(0.0), kZAxis(0.0, 0.0, 1.0);
+
+/// A scene node type: its JSON name, its keys (besides "type") and how to build it. A new shape
+/// is one entry here plus its class.
+struct NodeType
+{
+    const char* name;
+    std::vector<std::string> keys;
+    Implicit::Ptr (*build)(ObjectReader& r, const std::string& type, int depth);
+};
+
+Implicit::Ptr buildSphere(ObjectReader& r, const std::string&, int)
+{
+    return std::make_shared<implicit::Sphere>(r.vec3("center", kZero), r.positive("radius"));
+}
+
+Implicit::Ptr buildBox(ObjectReader& r, const std::string&, int)
+{
+    return std::make_shared<implicit::Box>(r.vec3("center", kZero), r.positiveVec3("size"));
+}
+
+Implicit::Ptr buildTorus(ObjectReader& r, const std::string&, int)
+{
+    const Vec3d c = r.vec3("center", kZero);
+    const double major = r.positive("major_radius"), minor = r.positive("minor_radius");
+    if (!(minor < major)) {
+        r.fail(r.childPath("minor_radius"), "must be < major_radius (" +
+               util::formatNumber(major) + ") for a ring torus, got " + util::formatNumber(minor));
+    }
+    return std::make_shared<implicit::Torus>(c, major, minor);
+}
+
+Implicit::Ptr buildQuadric(ObjectReader& r, const std::string&, int)
+{
+    return std::make_shared<implicit::Quadric>(parseMatrix(r));
+}
+
+Implicit::Ptr buildPlane(ObjectReader& r, const std::string&, int)
+{
+    const Vec3d n = axis(r, "normal", std::nullopt);
+    return implicit::makePlane(n, r.number("offset", 0.0));
+}
+
+Implicit::Ptr buildCylinder(ObjectReader& r, const std::string&, int)
+{
+    const Vec3d c = r.vec3("center", kZero), a = axis(r, "axis", kZAxis);
+    return implicit::makeCylinder(c, a, r.positive("radius"));
+}
+
+Implicit::Ptr buildEllipsoid(ObjectReader& r, const std::string&, int)
+{
+    return implicit::makeEllipsoid(r.vec3("center", kZero), r.positiveVec3("radii"));
+}
+
+Implicit::Ptr buildCone(ObjectReader& r, const std::string&, int)
+{
+    const Vec3d apex = r.vec3("apex", kZero), a = axis(r, "axis", kZAxis);
+    const double angle = r.number("half_angle_deg");
+    if (!(angle > 0.0 && angle < 90.0)) {
+        r.fail(r.childPath("half_angle_deg"),
+               "must be in (0, 90) degrees, got " + util::formatNumber(angle));
+    }
+    return implicit::makeCone(apex, a, angle);
+}
+
+Implicit::Ptr buildParaboloid(ObjectReader& r, const std::string&, int)
+{
+    const Vec3d v = r.vec3("vertex", kZero), a = axis(r, "axis", kZAxis);
+    const bool hyperbolic =
+        r.string("kind", {"elliptic", "hyperbolic"}, std::string("elliptic")) == "hyperbolic";
+    return implicit::makeParaboloid(v, a, hyperbolic, r.positive("a", 1.0), r.positive("b", 1.0));
+}
+
+Implicit::Ptr buildHyperboloid(ObjectReader& r, const std::string&, int)
+{
+    const Vec3d c = r.vec3("center", kZero), a = axis(r, "axis", kZAxis);
+    const bool two =
+        r.string("kind", {"one_sheet", "two_sheets"}, std::string("one_sheet")) == "two_sheets";
+    return implicit::makeHyperboloid(c, a, two, r.positiveVec3("radii", Vec3d(1.0)));
+}
+
+Implicit::Ptr buildCsg(ObjectReader& r, const std::string& type, int depth)
+{
+    return std::make_shared<implicit::Csg>(*implicit::csgOpFromString(type),
+                                           parseChildren(r, 1, depth));
+}
+
+Implicit::Ptr buildBlend(ObjectReader& r, const std::string&, int depth)
+{
+    const std::string op = r.string("op", implicit::csgOpNames());
+    const double sharp = r.limited("p", limits::kBlendP);
+    return std::make_shared<implicit::Blend>(*implicit::csgOpFromString(op), sharp,
+                                             parseChildren(r, 2, depth));
+}
+
+Implicit::Ptr buildTransform(ObjectReader& r, const std::string&, int depth)
+{
+    Vec3d scale(1.0);
+    if (r.has("scale")) {
+        const json& s = r.raw("scale");
+        scale = s.is_number() ? Vec3d(r.toNumber(s, r.childPath("scale")))
+                              : r.toVec3(s, r.childPath("scale"));
+        for (int i = 0; i < 3; ++i) {
+            if (!(scale[i] > 0.0)) {
+                r.fail(r.childPath("scale"), "must be > 0 (a number or 3 numbers), got " + brief(s));
+            }
+        }
+    }
+    const Vec3d t = r.vec3("translate", kZero), rot = r.vec3("rotate_deg", kZero);
+    auto child = parseNode(r.raw("child"), r.childPath("child"), r.origin(), depth + 1);
+    return std::make_shared<implicit::Transform>(child, t, rot, scale);
+}
+
+const std::vector<NodeType>& nodeTypes()
+{
+    static const std::vector<NodeType> types = {
+        {"sphere", {"center", "radius"}, buildSphere},
+        {"box", {"center", "size"}, buildBox},
+        {"torus", {"center", "major_radius", "minor_radius"}, buildTorus},
+        {"quadric", {"matrix"}, buildQuadric},
+        {"plane", {"normal", "offset"}, buildPlane},
+        {"cylinder", {"center", "axis", "radius"}, buildCylinder},
+        {"ellipsoid", {"center", "radii"}, buildEllipsoid},
+        {"cone", {"apex", "axis", "half_angle_deg"}, buildCone},
+        {"paraboloid", {"vertex", "axis", "kind", "a", "b"}, buildParaboloid},
+        {"hyperboloid", {"center", "axis", "kind", "radii"}, buildHyperboloid},
+        {"union", {"children"}, buildCsg},
+        {"intersection", {"children"}, buildCsg},
+        {"difference", {"children"}, buildCsg},
+        {"blend", {"op", "p", "children"}, buildBlend},
+        {"transform", {"translate", "rotate_deg", "scale", "child"}, buildTransform}};
+    return types;
+}
+
 Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin,
                         int depth)
 {
@@ -222,116 +374,18 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
         r.fail(path, "the shape tree is nested more than " + std::to_string(kMaxDepth) +
                          " levels deep; flatten it (union and intersection take many children)");
     }
-    static const std::vector<std::string> kTypes = {
-        "sphere", "box", "torus", "quadric", "plane", "cylinder", "ellipsoid", "cone",
-        "paraboloid", "hyperboloid", "union", "intersection", "difference", "blend", "transform"};
-    const std::string type = r.string("type", kTypes);
-    static const std::map<std::string, std::vector<std::string>> kKeys = {
-        {"sphere", {"center", "radius"}},
-        {"box", {"center", "size"}},
-        {"torus", {"center", "major_radius", "minor_radius"}},
-        {"quadric", {"matrix"}},
-        {"plane", {"normal", "offset"}},
-        {"cylinder", {"center", "axis", "radius"}},
-        {"ellipsoid", {"center", "radii"}},
-        {"cone", {"apex", "axis", "half_angle_deg"}},
-        {"paraboloid", {"vertex", "axis", "kind", "a", "b"}},
-        {"hyperboloid", {"center", "axis", "kind", "radii"}},
-        {"union", {"children"}},
-        {"intersection", {"children"}},
-        {"difference", {"children"}},
-        {"blend", {"op", "p", "children"}},
-        {"transform", {"translate", "rotate_deg", "scale", "child"}}};
+    std::vector<std::string> names;
+    for (const NodeType& t : nodeTypes()) names.push_back(t.name);
+    const std::string type = r.string("type", names);
+    const NodeType& node = nodeTypes()[size_t(std::find(names.begin(), names.end(), type) - names.begin())];
     std::vector<std::string> keys = {"type"};
-    const auto& own = kKeys.at(type);
-    keys.insert(keys.end(), own.begin(), own.end());
+    keys.insert(keys.end(), node.keys.begin(), node.keys.end());
     r.allowOnly(keys);
-    const Vec3d zero(0.0), zAxis(0.0, 0.0, 1.0);
-
     // Library constructors validate too; their messages get this node's path.
     try {
-        Implicit::Ptr node;
-        if (type == "sphere") {
-            node = std::make_shared<implicit::Sphere>(r.vec3("center", zero), r.positive("radius"));
-        } else if (type == "box") {
-            node = std::make_shared<implicit::Box>(r.vec3("center", zero), r.positiveVec3("size"));
-        } else if (type == "torus") {
-            const Vec3d c = r.vec3("center", zero);
-            const double major = r.positive("major_radius"), minor = r.positive("minor_radius");
-            if (!(minor < major)) {
-                r.fail(r.childPath("minor_radius"), "must be < major_radius (" +
-                       util::formatNumber(major) + ") for a ring torus, got " +
-                       util::formatNumber(minor));
-            }
-            node = std::make_shared<implicit::Torus>(c, major, minor);
-        } else if (type == "quadric") {
-            node = std::make_shared<implicit::Quadric>(parseMatrix(r));
-        } else if (type == "plane") {
-            const Vec3d n = r.vec3("normal");
-            if (n.length() == 0.0) r.fail(r.childPath("normal"), "must be non-zero, got [0, 0, 0]");
-            node = implicit::makePlane(n, r.number("offset", 0.0));
-        } else if (type == "cylinder") {
-            const Vec3d c = r.vec3("center", zero), a = r.vec3("axis", zAxis);
-            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
-            node = implicit::makeCylinder(c, a, r.positive("radius"));
-        } else if (type == "ellipsoid") {
-            node = implicit::makeEllipsoid(r.vec3("center", zero), r.positiveVec3("radii"));
-        } else if (type == "cone") {
-            const Vec3d apex = r.vec3("apex", zero), a = r.vec3("axis", zAxis);
-            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
-            const double angle = r.number("half_angle_deg");
-            if (!(angle > 0.0 && angle < 90.0)) {
-                r.fail(r.childPath("half_angle_deg"),
-                       "must be in (0, 90) degrees, got " + util::formatNumber(angle));
-            }
-            node = implicit::makeCone(apex, a, angle);
-        } else if (type == "paraboloid") {
-            const Vec3d v = r.vec3("vertex", zero), a = r.vec3("axis", zAxis);
-            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
-            const bool hyperbolic =
-                r.string("kind", {"elliptic", "hyperbolic"}, std::string("elliptic")) == "hyperbolic";
-            node = implicit::makeParaboloid(v, a, hyperbolic, r.positive("a", 1.0),
-                                            r.positive("b", 1.0));
-        } else if (type == "hyperboloid") {
-            const Vec3d c = r.vec3("center", zero), a = r.vec3("axis", zAxis);
-            if (a.length() == 0.0) r.fail(r.childPath("axis"), "must be non-zero, got [0, 0, 0]");
-            const bool two =
-                r.string("kind", {"one_sheet", "two_sheets"}, std::string("one_sheet")) == "two_sheets";
-            node = implicit::makeHyperboloid(c, a, two, r.positiveVec3("radii", Vec3d(1.0)));
-        } else if (type == "union" || type == "intersection" || type == "difference") {
-            const auto op = type == "union" ? implicit::Csg::Op::Union
-                          : type == "intersection" ? implicit::Csg::Op::Intersection
-                                                   : implicit::Csg::Op::Difference;
-            node = std::make_shared<implicit::Csg>(op, parseChildren(r, 1, depth));
-        } else if (type == "blend") {
-            const std::string op = r.string("op", {"union", "intersection", "difference"});
-            const double sharp = r.number("p");
-            if (!(sharp >= 0.1 && sharp <= 1000.0)) {
-                r.fail(r.childPath("p"), "must be in [0.1, 1000] (larger is sharper; the blend "
-                       "reaches about ln(2)/p from the crease), got " + util::formatNumber(sharp));
-            }
-            const auto kind = op == "union" ? implicit::Csg::Op::Union
-                            : op == "intersection" ? implicit::Csg::Op::Intersection
-                                                   : implicit::Csg::Op::Difference;
-            node = std::make_shared<implicit::Blend>(kind, sharp, parseChildren(r, 2, depth));
-        } else if (type == "transform") {
-            Vec3d scale(1.0);
-            if (r.has("scale")) {
-                const json& s = r.raw("scale");
-                scale = s.is_number() ? Vec3d(r.toNumber(s, r.childPath("scale")))
-                                      : r.toVec3(s, r.childPath("scale"));
-                for (int i = 0; i < 3; ++i) {
-                    if (!(scale[i] > 0.0)) {
-                        r.fail(r.childPath("scale"), "must be > 0 (a number or 3 numbers), got " +
-                                                         brief(s));
-                    }
-                }
-            }
-            const Vec3d t = r.vec3("translate", zero), rot = r.vec3("rotate_deg", zero);
-            auto child = parseNode(r.raw("child"), r.childPath("child"), origin, depth + 1);
-            node = std::make_shared<implicit::Transform>(child, t, rot, scale);
-        }
-        return node;
+        return node.build(r, type, depth);
+    } catch (const SceneError&) {
+        throw;
     } catch (const openvdb::Exception& e) {
         r.fail(path, util::errorText(e));
     }
@@ -347,18 +401,14 @@ Scene parseScene(const std::string& text, const std::string& origin)
     } catch (const json::exception& e) {
         // parse_error for bad syntax, out_of_range for numbers such as 1e999.
         throw SceneError(origin + ": not valid JSON: " + e.what() +
-                         " (scene files are JSON objects of finite numbers; see the README's "
-                         "scene format)");
+                         " (scene files are JSON objects of finite numbers; see docs/"
+                         "scene-format.md)");
     }
     ObjectReader r(j, "", origin);
     r.allowOnly({"voxel_size", "half_width", "bounds", "distance", "shape"});
     Scene scene;
     if (r.has("voxel_size")) scene.voxelSize = r.positive("voxel_size");
-    scene.halfWidth = r.positive("half_width", 3.0);
-    if (scene.halfWidth < 1.0 || scene.halfWidth > raster::kMaxHalfWidth) {
-        r.fail("half_width", "must be in [1, " + util::formatNumber(raster::kMaxHalfWidth) +
-                                 "] voxels, got " + util::formatNumber(scene.halfWidth));
-    }
+    scene.halfWidth = r.has("half_width") ? r.limited("half_width", limits::kHalfWidth) : 3.0;
     scene.distanceBound =
         r.string("distance", {"exact", "bound"}, std::string("exact")) == "bound";
     if (r.has("bounds")) {

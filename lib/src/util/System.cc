@@ -1,6 +1,14 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <ivdb/util/System.h>
 
+#include <ivdb/util/Interrupt.h>
+
+#include <openvdb/Exceptions.h>
+
+#include <algorithm>
+#include <cctype>
 #include <cstdio>
+#include <filesystem>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -27,6 +35,23 @@ std::uint64_t readKb(const char* file, const std::string& key)
 std::uint64_t availableMemory() { return readKb("/proc/meminfo", "MemAvailable:"); }
 
 std::uint64_t peakResidentMemory() { return readKb("/proc/self/status", "VmHWM:"); }
+
+std::uint64_t residentMemory() { return readKb("/proc/self/status", "VmRSS:"); }
+
+double memoryBudget(std::uint64_t limit)
+{
+    if (limit) return double(limit);
+    const double available = double(availableMemory()); // 0 when unknown
+    return available > 0.0 ? kMemoryFraction * available : 1e18;
+}
+
+std::string extensionOf(const std::string& path)
+{
+    std::string e = std::filesystem::path(path).extension().string();
+    std::transform(e.begin(), e.end(), e.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    return e;
+}
 
 std::string formatBytes(double bytes)
 {
@@ -66,6 +91,11 @@ std::string formatNumber(double v)
         if (std::strtod(buf, nullptr) == v) break;
     }
     return buf;
+}
+
+void throwInterrupted()
+{
+    OPENVDB_THROW(openvdb::RuntimeError, "interrupted");
 }
 
 } // namespace ivdb::util

@@ -1,6 +1,8 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <ivdb/implicit/Implicit.h>
+#include <ivdb/util/Params.h>
 
 #include <openvdb/openvdb.h>
 #include <openvdb/util/NullInterrupter.h>
@@ -9,18 +11,17 @@
 
 namespace ivdb::diff {
 
-/// @brief The largest gradient step, in voxels (wider than any useful band: beyond it a stencil
-/// reads only the clamped background).
-inline constexpr int kMaxStep = 20;
+/// @brief The largest gradient step, in voxels (limits::kStep).
+inline constexpr int kMaxStep = int(limits::kStep.hi);
 
-/// @brief Central-difference gradient (seed eq. 9) with a step of @a step voxels:
+/// @brief Central-difference gradient (docs/method.md#discrete-gradient) with a step of @a step voxels:
 /// (phi(x + K) - phi(x - K)) / (2 K dx) per axis, in world units.
 /// @details The output has the input's transform and active topology (the band), is named
 /// "gradient", and is a covariant world-space vector grid. Neighbours outside the band read the
 /// input's inactive values (+/- background, clamped), as OpenVDB's tools do. With step 1 it equals
 /// openvdb::tools::gradient. Leaf-parallel: each leaf's stencil reads one dense block gathered
 /// from the leaf and its neighbours' buffers, not per-voxel accessor calls.
-/// @throw openvdb::ValueError if @a step is not in [1, kMaxStep] or the grid has a non-uniform
+/// @throw ParamError if @a step is not in [1, kMaxStep]; openvdb::ValueError if the grid has a non-uniform
 /// voxel size
 openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step = 1,
                                  bool threaded = true);
@@ -34,7 +35,7 @@ enum class Curvature {
     Mean,
     /// k1 k2: 1/r^2 on a sphere
     Gaussian,
-    /// the Laplacian of phi (seed eqs. 10-11): 2/r on a sphere's distance field
+    /// the Laplacian of phi (docs/method.md#curvature): 2/r on a sphere's distance field
     Laplacian
 };
 
@@ -75,10 +76,5 @@ struct GradientComparison
 /// background outside the band.
 GradientComparison compareGradient(const implicit::Implicit& shape, const openvdb::FloatGrid& phi,
                                    const openvdb::Vec3SGrid& grad, int step);
-
-/// @brief Check that @a grid is something the operators accept: a scalar float level set with a
-/// uniform voxel size. @a what names it in messages ("in.vdb: grid 'surface'").
-/// @throw openvdb::TypeError or openvdb::ValueError explaining what is wrong and what to use
-void checkLevelSet(const openvdb::GridBase& grid, const std::string& what);
 
 } // namespace ivdb::diff

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <ivdb/implicit/Csg.h>
@@ -11,7 +12,7 @@ namespace ivdb::implicit {
 /// (1/p) ln sum exp(p t_i), evaluated around the extreme term so that nothing overflows.
 double blendTerms(Csg::Op op, double p, const double* t, std::size_t n);
 
-/// @brief Super-elliptic blended CSG (seed eqs. 12-15) over any number of children.
+/// @brief Super-elliptic blended CSG (docs/method.md#super-elliptic-blend) over any number of children.
 /// @details With the density D = exp(-f): union f = -(1/p) ln(sum exp(-p f_i)); intersection the
 /// same with -p; difference = intersection of the first child with the others negated. Computed as
 /// a log-sum-exp around the extreme term, so no exp overflows or underflows to -inf for any p in
@@ -23,8 +24,8 @@ class Blend final: public Implicit
 public:
     using Op = Csg::Op;
 
-    /// @throw openvdb::ValueError if @a p is not in [0.1, 1000], or @a children is empty or
-    /// holds a null pointer
+    /// @throw ParamError if @a p is not in limits::kBlendP; openvdb::ValueError if @a children
+    /// is empty or holds a null pointer
     Blend(Op op, double p, std::vector<Ptr> children);
 
     double value(const Vec3d& p) const override;

@@ -1,12 +1,14 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
+#include <ivdb/implicit/CsgOp.h>
 #include <ivdb/implicit/Implicit.h>
 
 #include <vector>
 
 namespace ivdb::implicit {
 
-/// @brief Sharp CSG over any number of children (seed eqs. 1-3).
+/// @brief Sharp CSG over any number of children (docs/method.md#csg).
 /// @details Union = min, intersection = max, difference = max(A, -B1, -B2, ...). The result is
 /// not an exact distance near creases, so the rasterizer re-distances it. prune() drops the
 /// children that cannot decide the result inside a box, which keeps a union of many shapes
@@ -14,7 +16,7 @@ namespace ivdb::implicit {
 class Csg final: public Implicit
 {
 public:
-    enum class Op { Union, Intersection, Difference };
+    using Op = CsgOp;
 
     /// @throw openvdb::ValueError if @a children is empty or holds a null pointer
     Csg(Op op, std::vector<Ptr> children);

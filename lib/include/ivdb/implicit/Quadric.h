@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <ivdb/implicit/Implicit.h>
@@ -9,9 +10,9 @@ namespace ivdb::implicit {
 /// @brief A symmetric 4x4 matrix, row-major: Q[row][column].
 using Mat4 = std::array<std::array<double, 4>, 4>;
 
-/// @brief The general quadric f(p) = [p 1] Q [p 1]^T (seed eq. 4), negative inside.
+/// @brief The general quadric f(p) = [p 1] Q [p 1]^T (docs/method.md#quadrics), negative inside.
 /// @details Writing Q = [[A, b], [b^T, c]], f(p) = p^T A p + 2 b.p + c and the gradient is
-/// 2 (A p + b) = 2 Q_sub [p 1]^T (seed eq. 8). Quadric values are not distances (except for a
+/// 2 (A p + b) = 2 Q_sub [p 1]^T (docs/method.md#quadric-gradient). Quadric values are not distances (except for a
 /// plane with a unit normal); the rasterizer re-distances them. The interval over a box uses the
 /// centered form f(m) + g(m).d + d^T A d bounded term by term, which is exact for planes and
 /// tightens quadratically as boxes shrink.

@@ -1,32 +1,15 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
+
+#include <ivdb/io/AtomicFile.h>
 
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
-#include <functional>
-#include <ostream>
 #include <string>
 #include <vector>
 
 namespace ivdb::io {
-
-/// @brief Fail early, before a long computation, if @a path cannot become an output file: its
-/// folder must exist and be writable, and @a path must not be a folder.
-/// @throw openvdb::IoError naming the path and the reason
-void checkOutputPath(const std::string& path);
-
-/// @brief Write a file atomically: @a write fills a stream on a temporary file in @a path's
-/// folder (`.NAME.tmp-PID-N`), which is then flushed, synced and renamed over @a path. A failure
-/// (a full disk, an exception from @a write) removes the temporary file and leaves @a path as it
-/// was. Stream errors throw inside @a write (the stream has exceptions enabled).
-/// @throw openvdb::IoError naming the path and the reason
-void writeFileAtomically(const std::string& path,
-                         const std::function<void(std::ostream&)>& write);
-
-/// @brief Remove the temporary file that writeFileAtomically is writing now, if any.
-/// @details Async-signal-safe (one unlink): for a signal handler that is about to end the
-/// process, so that an interrupted write leaves nothing behind.
-void removePendingTemporaryFile() noexcept;
 
 /// @brief Write @a grids to @a path with OpenVDB's default compression, atomically
 /// (writeFileAtomically).
@@ -48,9 +31,24 @@ openvdb::GridPtrVec readVdb(const std::string& path);
 
 /// @brief The grid named @a name in @a grids, or the first level set when @a name is empty.
 /// @param path  the file the grids came from, for messages
-/// @throw openvdb::LookupError naming the file, the grid and what the file holds
+/// @throw ParamError (parameter "grid") naming the file, the grid and what the file holds
 openvdb::GridBase::Ptr selectGrid(const openvdb::GridPtrVec& grids, const std::string& path,
                                   const std::string& name);
+
+/// @brief A grid of a file, written FILE.vdb[:GRID]: a path that exists is taken whole, else
+/// the text after the last ':' names the grid (empty: the file's first grid).
+struct GridRef
+{
+    std::string file, grid;
+    static GridRef parse(const std::string& text);
+};
+
+/// @brief Stamp @a grid as made by ivdb: the `creator` (Houdini shows it as vdb_creator),
+/// `ivdb_version` and `ivdb_source` (@a source: what it was made from) metadata.
+void stampGrid(openvdb::GridBase& grid, const std::string& source);
+
+/// @brief writeVdb() with the file's `creator` metadata set to this ivdb version.
+void writeVdbStamped(const std::string& path, const openvdb::GridCPtrVec& grids);
 
 /// @brief Check a grid read from @a path before it is used: a finite, non-degenerate transform,
 /// every value (background, tiles and voxels) finite for float, double and vector grids, and a

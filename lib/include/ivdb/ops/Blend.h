@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <ivdb/ops/Csg.h>
@@ -24,7 +25,7 @@ struct BlendSettings
 /// term d beyond the others contributes at most exp(-p d) / p.
 double blendReach(double p, double toleranceWorld);
 
-/// @brief Super-elliptic blended CSG of level sets (seed eqs. 12-15) on grids.
+/// @brief Super-elliptic blended CSG of level sets (docs/method.md#grid-blend) on grids.
 /// @details Inputs are resampled onto the finest one (as csg()). The blend differs from the sharp
 /// operation by more than the tolerance only where two inputs are within blendReach() of each
 /// other near the output band: the crease. So the result is the sharp operation (OpenVDB's csg

@@ -1,4 +1,7 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
+
+#include <ivdb/implicit/CsgOp.h>
 
 #include <openvdb/openvdb.h>
 
@@ -7,9 +10,10 @@
 
 namespace ivdb::ops {
 
-enum class CsgOp { Union, Intersection, Difference };
+/// @brief The operations, shared with scene trees (implicit::CsgOp).
+using CsgOp = implicit::CsgOp;
 
-/// @brief Sharp CSG of narrow-band level sets (seed eqs. 1-3): union = min, intersection = max,
+/// @brief Sharp CSG of narrow-band level sets (docs/method.md#csg): union = min, intersection = max,
 /// difference = max(A, -B) of the first input with each following one subtracted.
 /// @details Inputs whose transform differs from the finest input's (smallest voxel) are first
 /// resampled onto it (openvdb::tools::resampleToMatch, which rebuilds level sets); each

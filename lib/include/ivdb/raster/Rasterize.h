@@ -1,6 +1,8 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <ivdb/implicit/Implicit.h>
+#include <ivdb/util/Params.h>
 
 #include <openvdb/openvdb.h>
 #include <openvdb/util/NullInterrupter.h>
@@ -18,8 +20,8 @@ enum class Sampling {
     Dense
 };
 
-/// @brief The widest narrow band accepted, in voxels.
-inline constexpr double kMaxHalfWidth = 1000.0;
+/// @brief The widest narrow band accepted, in voxels (limits::kHalfWidth).
+inline constexpr double kMaxHalfWidth = limits::kHalfWidth.hi;
 
 /// What a CSG of exact distances stores in the band.
 enum class Distance
@@ -62,7 +64,8 @@ struct RasterSettings
 /// value is an exact distance are stored as is (rounded to float); others (quadrics, CSG) are
 /// estimated as f / |grad f| next to the surface and re-distanced by fast sweeping.
 /// Sparse and dense sampling give the same active voxels and values.
-/// @throw openvdb::ValueError for a bad setting or an unbounded shape without bounds
+/// @throw ParamError for a bad voxel size or half width
+/// @throw openvdb::ValueError for an unbounded shape without bounds
 /// @throw openvdb::RuntimeError if dense sampling would not fit in memory
 /// @throw openvdb::RuntimeError if the interrupter cancels the run
 openvdb::FloatGrid::Ptr rasterize(const implicit::Implicit::Ptr& shape,

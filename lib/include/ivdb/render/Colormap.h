@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <openvdb/Types.h>
@@ -13,7 +14,7 @@ namespace ivdb::render {
 class Colormap
 {
 public:
-    /// @throw openvdb::ValueError naming the choices for an unknown @a name
+    /// @throw ParamError (parameter "colormap") naming the choices for an unknown @a name
     explicit Colormap(const std::string& name);
 
     /// The names accepted, in the order the CLI lists them.
@@ -35,5 +36,10 @@ private:
     std::string mName;
     const float (*mTable)[3] = nullptr; // 256 entries; null: gray, i / 255
 };
+
+/// @brief The colour of a direction, the one convention of every vector colouring (render, mesh
+/// vertices, arrows): RGB = 0.5 n + 0.5 for the unit vector n of @a v; mid grey for a zero
+/// vector.
+openvdb::Vec3f directionColor(const openvdb::Vec3d& v);
 
 } // namespace ivdb::render

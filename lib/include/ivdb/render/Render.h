@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <ivdb/render/Colormap.h>
@@ -5,6 +6,7 @@
 #include <openvdb/openvdb.h>
 
 #include <optional>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -33,6 +35,15 @@ struct RenderSettings
     double lo = 0.0, hi = 1.0;
 };
 
+/// @brief Check an image size before anything is computed: each side in limits::kImageSide, and
+/// the image's buffers within util::memoryBudget().
+/// @throw ParamError (parameter "size") saying which and why
+void checkImageSize(int width, int height);
+
+/// @brief The range of a grid's active values (and tiles), [lo, hi] with hi > lo (lo + 1 when
+/// every value is the same): the default colour range.
+std::pair<double, double> valueRange(const openvdb::FloatGrid& grid);
+
 /// @brief A rendered image: rows top to bottom. Colours are sRGB-encoded in [0, 1] (as a PNG
 /// stores them); alpha is 1 on the surface, 0 on the background; depth is the world distance
 /// from the eye (infinity on the background); normals are world-space unit vectors.
@@ -45,7 +56,8 @@ struct Image
 
 /// @brief Ray-trace the zero surface of a level set (openvdb::tools::LevelSetRayIntersector),
 /// one ray a pixel, in parallel over rows; Lambert shading from a light above the eye.
-/// @throw openvdb::ValueError for a size outside [1, 16384] or a degenerate camera
+/// @throw ParamError for a size outside [1, 16384] or too large for memory
+/// @throw openvdb::ValueError for a degenerate camera
 Image renderLevelSet(const openvdb::FloatGrid& grid, const RenderSettings& settings);
 
 /// @brief Draw a vertical colour bar of @a map (low at the bottom) at the right of @a image.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #pragma once
 
 #include <cstdint>
@@ -11,6 +12,19 @@ std::uint64_t availableMemory();
 
 /// @brief Peak resident memory of this process so far (VmHWM), in bytes.
 std::uint64_t peakResidentMemory();
+
+/// @brief Resident memory of this process now (VmRSS), in bytes.
+std::uint64_t residentMemory();
+
+/// @brief The share of the available memory a large allocation may take by default.
+inline constexpr double kMemoryFraction = 0.8;
+
+/// @brief Bytes an operation may allocate: @a limit if it is not 0, else kMemoryFraction of
+/// availableMemory() (or no limit when that is unknown). The one memory rule of the library.
+double memoryBudget(std::uint64_t limit = 0);
+
+/// @brief A path's extension in lower case, with its dot (".vdb"), or "" if it has none.
+std::string extensionOf(const std::string& path);
 
 /// @brief "12.3 MB"-style text for a byte count (powers of 1000 for MB/GB, as file sizes).
 std::string formatBytes(double bytes);

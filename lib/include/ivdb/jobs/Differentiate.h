@@ -1,0 +1,80 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+
+#include <ivdb/diff/Differential.h>
+#include <ivdb/util/Interrupt.h>
+
+#include <openvdb/openvdb.h>
+
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ivdb::jobs {
+
+/// @brief What gradient() does: the central-difference gradient of a level set from a file.
+struct GradientOptions
+{
+    std::string input, output;  ///< output empty: nothing written
+    std::string grid;           ///< empty: the first level set
+    int step = 1;               ///< difference step in voxels (limits::kStep)
+    bool magnitude = false;     ///< also `gradient_magnitude`
+    bool withInput = false;     ///< also copy the input level set into the output
+};
+
+struct GradientResult
+{
+    openvdb::FloatGrid::Ptr input;
+    openvdb::Vec3SGrid::Ptr gradient;
+    openvdb::FloatGrid::Ptr magnitude; ///< null unless asked for
+    double readSeconds = 0.0, computeSeconds = 0.0, totalSeconds = 0.0;
+};
+
+/// @throw ParamError for a bad step or grid; what readLevelSet throws. Nothing is written on
+/// any error.
+GradientResult gradient(const GradientOptions& options);
+
+enum class CurvatureMethod { Mean, Gaussian, Principal, Laplacian };
+
+/// @brief "mean", "gaussian", "principal", "laplacian".
+const std::vector<std::string>& curvatureMethodNames();
+
+struct CurvatureOptions
+{
+    std::string input, output, grid;
+    CurvatureMethod method = CurvatureMethod::Mean;
+    bool withInput = false;
+};
+
+struct CurvatureResult
+{
+    openvdb::FloatGrid::Ptr input;
+    std::vector<openvdb::FloatGrid::Ptr> grids; ///< `curvature`, or `k1` and `k2` (principal)
+    double readSeconds = 0.0, computeSeconds = 0.0, totalSeconds = 0.0;
+};
+
+/// @brief Curvature of a level set from a file, each grid stamped with its convention
+/// (`ivdb_curvature` metadata).
+CurvatureResult curvature(const CurvatureOptions& options);
+
+/// @brief What compareGradient() does: rasterize a scene and compare the discrete gradient of
+/// its band with the shape's normalized analytic gradient.
+struct CompareGradientOptions
+{
+    std::string scene;
+    std::optional<double> voxelSize, halfWidth;
+    std::vector<int> steps{1};
+    util::Interrupter* interrupter = nullptr;
+};
+
+struct CompareGradientResult
+{
+    double voxelSize = 0.0;
+    std::uint64_t activeVoxels = 0;
+    std::vector<std::pair<int, diff::GradientComparison>> steps; ///< per step, in order
+};
+
+CompareGradientResult compareGradient(const CompareGradientOptions& options);
+
+} // namespace ivdb::jobs
