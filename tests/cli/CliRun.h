@@ -2,10 +2,16 @@
 // Running the ivdb binary from CLI tests: exit code, stdout and stderr of one run.
 #pragma once
 
+#include <openvdb/openvdb.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -121,5 +127,110 @@ inline int waitIvdb(pid_t pid, double seconds)
         ::usleep(1000);
     }
 }
+
+/// A fixture for runs of the binary in a folder of their own (mDir/run), bounded (60 s, a 3 GB
+/// address-space cap), with checks of failed runs: the message, and that nothing was written.
+class CliTest: public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        mDir = std::filesystem::temp_directory_path() /
+               ("ivdb-test-cli-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        std::filesystem::remove_all(mDir);
+        std::filesystem::create_directories(mDir / "run");
+    }
+
+    void TearDown() override
+    {
+        std::error_code ec;
+        std::filesystem::remove_all(mDir, ec);
+    }
+
+    /// Run `ivdb ARGS` in mDir/run; listings of that folder show only what ivdb made.
+    CliResult run(const std::vector<std::string>& args) const
+    {
+        return runIvdb(mDir / "run", args, 60, kAddressCap);
+    }
+
+    /// A path inside the working folder of the runs.
+    std::string path(const std::string& name) const { return (mDir / "run" / name).string(); }
+
+    static std::string data(const std::string& name)
+    {
+        return std::string(IVDB_DATA_DIR) + "/" + name;
+    }
+
+    void writeText(const std::string& name, const std::string& text) const
+    {
+        std::ofstream(path(name), std::ios::binary | std::ios::trunc) << text;
+    }
+
+    /// Every file and folder below the run folder.
+    std::set<std::string> listing() const
+    {
+        std::set<std::string> names;
+        for (const auto& e : std::filesystem::recursive_directory_iterator(mDir / "run")) {
+            names.insert(std::filesystem::relative(e.path(), mDir / "run").string());
+        }
+        return names;
+    }
+
+    static void expectMentions(const std::string& text, const std::vector<std::string>& parts,
+                               const std::string& what)
+    {
+        for (const auto& part : parts) {
+            EXPECT_NE(text.find(part), std::string::npos)
+                << what << ": does not mention '" << part << "':\n" << text;
+        }
+    }
+
+    /// Check a failed run: non-zero exit (not a signal or the timeout), `ivdb: error: ` first
+    /// on stderr naming @a mentions, no summary on stdout.
+    static void expectError(const CliResult& r, const std::vector<std::string>& mentions,
+                            const std::string& what)
+    {
+        EXPECT_NE(r.exitCode, 0) << what;
+        EXPECT_LT(r.exitCode, 124) << what << ": timed out or killed by a signal";
+        EXPECT_EQ(r.err.find("bad_alloc"), std::string::npos)
+            << what << ": ran out of memory (3 GB) instead of refusing the input:\n" << r.err;
+        EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << what << ": stderr is:\n" << r.err;
+        expectMentions(r.err, mentions, what);
+        EXPECT_EQ(r.out.find("active voxels"), std::string::npos) << what << ": stdout:\n" << r.out;
+    }
+
+    /// Run @a args plus `-o OUTPUT` twice: with no output file (none may appear, nor anything
+    /// else) and over an existing file (it must stay byte-identical), each a failure naming
+    /// @a mentions.
+    void expectFails(std::vector<std::string> args, const std::string& output,
+                     const std::vector<std::string>& mentions, const std::string& what) const
+    {
+        args.push_back("-o");
+        args.push_back(output);
+        {
+            SCOPED_TRACE(what + " (no existing output)");
+            const std::set<std::string> before = listing();
+            expectError(run(args), mentions, what);
+            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
+        }
+        const std::filesystem::path out(path(output));
+        // an output that cannot be a file (a missing folder, or a folder itself)
+        if (!std::filesystem::is_directory(out.parent_path()) || std::filesystem::exists(out)) return;
+        {
+            SCOPED_TRACE(what + " (existing output)");
+            const std::string old = "an existing output that must not change\n";
+            std::ofstream(out, std::ios::binary | std::ios::trunc) << old;
+            const std::set<std::string> before = listing();
+            expectError(run(args), mentions, what);
+            EXPECT_EQ(slurpFile(out), old) << what << ": the existing output changed";
+            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
+            std::filesystem::remove(out);
+        }
+    }
+
+    std::filesystem::path mDir;
+};
 
 } // namespace ivdb::test

@@ -29,108 +29,9 @@ namespace {
 namespace fs = std::filesystem;
 using RunResult = ivdb::test::CliResult;
 
-class TestCli: public ::testing::Test
+class TestCli: public ivdb::test::CliTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() /
-               ("ivdb-test-cli-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-        fs::remove_all(mDir);
-        fs::create_directories(mDir / "run");
-    }
-
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-
-    /// Run `ivdb ARGS` in mDir/run (60 s and a 3 GB address-space cap, so a runaway run fails
-    /// instead of hanging); listings of that folder show only what ivdb made.
-    RunResult run(const std::vector<std::string>& args) const
-    {
-        return ivdb::test::runIvdb(mDir / "run", args, 60, ivdb::test::kAddressCap);
-    }
-
-    /// A path inside the working folder of the runs.
-    std::string path(const std::string& name) const { return (mDir / "run" / name).string(); }
-
-    void writeText(const std::string& name, const std::string& text) const
-    {
-        std::ofstream(path(name), std::ios::binary | std::ios::trunc) << text;
-    }
-
-    std::set<std::string> listing() const
-    {
-        std::set<std::string> names;
-        for (const auto& e : fs::recursive_directory_iterator(mDir / "run")) {
-            names.insert(fs::relative(e.path(), mDir / "run").string());
-        }
-        return names;
-    }
-
-    static std::string data(const std::string& name)
-    {
-        return std::string(IVDB_DATA_DIR) + "/" + name;
-    }
-
-    static void expectMentions(const std::string& text, const std::vector<std::string>& parts,
-                               const std::string& what)
-    {
-        for (const auto& part : parts) {
-            EXPECT_NE(text.find(part), std::string::npos)
-                << what << ": does not mention '" << part << "':\n" << text;
-        }
-    }
-
-    /// Check a failed run: non-zero exit, `ivdb: error: ` first on stderr naming @a mentions,
-    /// no summary on stdout.
-    static void expectError(const RunResult& r, const std::vector<std::string>& mentions,
-                            const std::string& what)
-    {
-        EXPECT_NE(r.exitCode, 0) << what;
-        EXPECT_LT(r.exitCode, 124) << what << ": timed out or killed by a signal";
-        EXPECT_EQ(r.err.find("bad_alloc"), std::string::npos)
-            << what << ": ran out of memory (3 GB) instead of refusing the input:\n" << r.err;
-        EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << what << ": stderr is:\n" << r.err;
-        expectMentions(r.err, mentions, what);
-        EXPECT_EQ(r.out.find("active voxels"), std::string::npos) << what << ": stdout:\n" << r.out;
-    }
-
-    /// Run `ivdb rasterize` with @a args plus `-o OUTPUT` twice: once with no output file (none
-    /// may appear, nor anything else) and once over an existing file (it must stay byte-identical).
-    void expectRasterizeFails(std::vector<std::string> args, const std::string& output,
-                              const std::vector<std::string>& mentions, const std::string& what)
-    {
-        args.insert(args.begin(), "rasterize");
-        args.push_back("-o");
-        args.push_back(output);
-        {
-            SCOPED_TRACE(what + " (no existing output)");
-            const std::set<std::string> before = listing();
-            const RunResult r = run(args);
-            expectError(r, mentions, what);
-            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
-        }
-        const fs::path out = fs::path(path("")) / output;
-        // an output that cannot exist as a file (missing folder, or a folder itself)
-        if (!fs::is_directory(out.parent_path()) || fs::is_directory(out)) return;
-        {
-            SCOPED_TRACE(what + " (existing output)");
-            const std::string old = "an existing output that must not change\n";
-            std::ofstream(out, std::ios::binary | std::ios::trunc) << old;
-            const std::set<std::string> before = listing();
-            const RunResult r = run(args);
-            expectError(r, mentions, what);
-            EXPECT_EQ(ivdb::test::slurpFile(out), old) << what << ": the existing output changed";
-            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
-            fs::remove(out);
-        }
-    }
-
     /// Rasterize @a scene into @a output (in the run folder); asserts success.
     RunResult rasterize(const std::string& scene, const std::string& output,
                         std::vector<std::string> extra = {}) const
@@ -288,28 +189,28 @@ TEST_F(TestCli, BadScenes)
         {"type": "sphere", "radius": 1},
         {"type": "sphere", "center": [1, 0, 0], "radius": 1},
         {"type": "sphere", "center": [2, 0, 0], "radius": -1}]}})");
-    expectRasterizeFails({"neg.json"}, "out.vdb", {"neg.json", "shape.children[2].radius", "-1"},
+    expectFails({"rasterize", "neg.json"}, "out.vdb", {"neg.json", "shape.children[2].radius", "-1"},
                          "negative radius");
 
     writeText("key.json", R"({"voxel_size": 0.01,
         "shape": {"type": "sphere", "radius": 1, "radus": 1}})");
-    expectRasterizeFails({"key.json"}, "out.vdb", {"key.json", "shape.radus", "unknown"},
+    expectFails({"rasterize", "key.json"}, "out.vdb", {"key.json", "shape.radus", "unknown"},
                          "unknown key");
 
     writeText("bad.json", R"({"voxel_size": 0.01, "shape": {"type": "sphere", "radius": 1})");
-    expectRasterizeFails({"bad.json"}, "out.vdb", {"bad.json", "JSON"}, "invalid JSON");
+    expectFails({"rasterize", "bad.json"}, "out.vdb", {"bad.json", "JSON"}, "invalid JSON");
 
-    expectRasterizeFails({"missing.json"}, "out.vdb", {"missing.json"}, "missing scene file");
+    expectFails({"rasterize", "missing.json"}, "out.vdb", {"missing.json"}, "missing scene file");
 
     writeText("plane.json", R"({"voxel_size": 0.05,
         "shape": {"type": "plane", "normal": [0, 0, 1], "offset": 0}})");
-    expectRasterizeFails({"plane.json"}, "out.vdb", {"plane.json", "bounds"}, "unbounded plane");
+    expectFails({"rasterize", "plane.json"}, "out.vdb", {"plane.json", "bounds"}, "unbounded plane");
 
     writeText("novoxel.json", R"({"shape": {"type": "sphere", "radius": 1}})");
     writeText("huge.json", R"({"voxel_size": 0.01, "shape": {"type": "sphere", "radius": 1e999}})");
-    expectRasterizeFails({"huge.json"}, "out.vdb", {"huge.json", "1e999"}, "radius 1e999");
+    expectFails({"rasterize", "huge.json"}, "out.vdb", {"huge.json", "1e999"}, "radius 1e999");
 
-    expectRasterizeFails({"novoxel.json"}, "out.vdb",
+    expectFails({"rasterize", "novoxel.json"}, "out.vdb",
                          {"novoxel.json", "voxel_size", "--voxel-size"},
                          "no voxel size anywhere");
 }
@@ -317,19 +218,19 @@ TEST_F(TestCli, BadScenes)
 TEST_F(TestCli, BadOptions)
 {
     const std::string scene = data("sphere.json");
-    expectRasterizeFails({scene, "--voxel-size", "0"}, "out.vdb", {"--voxel-size", "0"},
+    expectFails({"rasterize", scene, "--voxel-size", "0"}, "out.vdb", {"--voxel-size", "0"},
                          "--voxel-size 0");
-    expectRasterizeFails({scene, "--voxel-size", "-1"}, "out.vdb", {"--voxel-size", "-1"},
+    expectFails({"rasterize", scene, "--voxel-size", "-1"}, "out.vdb", {"--voxel-size", "-1"},
                          "--voxel-size -1");
-    expectRasterizeFails({scene, "--half-width", "0.5"}, "out.vdb", {"--half-width", "0.5"},
+    expectFails({"rasterize", scene, "--half-width", "0.5"}, "out.vdb", {"--half-width", "0.5"},
                          "--half-width 0.5");
-    expectRasterizeFails({scene, "--sampling", "foo"}, "out.vdb", {"--sampling", "foo"},
+    expectFails({"rasterize", scene, "--sampling", "foo"}, "out.vdb", {"--sampling", "foo"},
                          "--sampling foo");
-    expectRasterizeFails({scene}, "nodir/out.vdb", {"nodir/out.vdb", "nodir"},
+    expectFails({"rasterize", scene}, "nodir/out.vdb", {"nodir/out.vdb", "nodir"},
                          "output into a missing folder");
     EXPECT_FALSE(fs::exists(path("nodir")));
     fs::create_directories(path("outdir"));
-    expectRasterizeFails({scene}, "outdir", {"outdir", "folder"}, "output is a folder");
+    expectFails({"rasterize", scene}, "outdir", {"outdir", "folder"}, "output is a folder");
     EXPECT_TRUE(fs::is_empty(path("outdir")));
 }
 

@@ -32,32 +32,9 @@ namespace {
 namespace fs = std::filesystem;
 using RunResult = ivdb::test::CliResult;
 
-class TestCliDiff: public ::testing::Test
+class TestCliDiff: public ivdb::test::CliTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() / ("ivdb-test-cli-diff-" + std::to_string(::getpid()) +
-                                            "-" + std::to_string(counter++));
-        fs::remove_all(mDir);
-        fs::create_directories(mDir / "run");
-    }
-
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-
-    /// Run `ivdb ARGS` in mDir/run (60 s and a 3 GB address-space cap, so a runaway run fails
-    /// instead of hanging); listings of that folder show only what ivdb made.
-    RunResult run(const std::vector<std::string>& args) const
-    {
-        return ivdb::test::runIvdb(mDir / "run", args, 60, ivdb::test::kAddressCap);
-    }
-
     /// Run and expect success with nothing on stderr.
     RunResult runOk(const std::vector<std::string>& args) const
     {
@@ -67,68 +44,6 @@ protected:
         EXPECT_EQ(r.exitCode, 0) << "ivdb" << cmd << "\nstderr:\n" << r.err;
         EXPECT_EQ(r.err, "") << "ivdb" << cmd;
         return r;
-    }
-
-    std::string path(const std::string& name) const { return (mDir / "run" / name).string(); }
-
-    std::set<std::string> listing() const
-    {
-        std::set<std::string> names;
-        for (const auto& e : fs::recursive_directory_iterator(mDir / "run")) {
-            names.insert(fs::relative(e.path(), mDir / "run").string());
-        }
-        return names;
-    }
-
-    static std::string data(const std::string& name)
-    {
-        return std::string(IVDB_DATA_DIR) + "/" + name;
-    }
-
-    static void expectMentions(const std::string& text, const std::vector<std::string>& parts,
-                               const std::string& what)
-    {
-        for (const auto& part : parts) {
-            EXPECT_NE(text.find(part), std::string::npos)
-                << what << ": does not mention '" << part << "':\n" << text;
-        }
-    }
-
-    static void expectError(const RunResult& r, const std::vector<std::string>& mentions,
-                            const std::string& what)
-    {
-        EXPECT_NE(r.exitCode, 0) << what;
-        EXPECT_LT(r.exitCode, 124) << what << ": timed out or killed by a signal";
-        EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << what << ": stderr is:\n" << r.err;
-        expectMentions(r.err, mentions, what);
-        EXPECT_EQ(r.out.find("active voxels"), std::string::npos) << what << ": stdout:\n" << r.out;
-    }
-
-    /// Run @a args plus `-o OUTPUT` twice: with no output file (none may appear, nor anything
-    /// else) and over an existing file (it must stay byte-identical).
-    void expectFails(std::vector<std::string> args, const std::string& output,
-                     const std::vector<std::string>& mentions, const std::string& what)
-    {
-        args.push_back("-o");
-        args.push_back(output);
-        {
-            SCOPED_TRACE(what + " (no existing output)");
-            const std::set<std::string> before = listing();
-            expectError(run(args), mentions, what);
-            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
-        }
-        const fs::path out = fs::path(path(output));
-        if (!fs::is_directory(out.parent_path()) || fs::exists(out)) return;
-        {
-            SCOPED_TRACE(what + " (existing output)");
-            const std::string old = "an existing output that must not change\n";
-            std::ofstream(out, std::ios::binary | std::ios::trunc) << old;
-            const std::set<std::string> before = listing();
-            expectError(run(args), mentions, what);
-            EXPECT_EQ(ivdb::test::slurpFile(out), old) << what << ": the existing output changed";
-            EXPECT_EQ(listing(), before) << what << ": files were created or removed";
-            fs::remove(out);
-        }
     }
 
     /// All grids of a .vdb file, by name.
