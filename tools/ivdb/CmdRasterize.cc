@@ -35,6 +35,15 @@ int runRasterize(RasterizeArgs& a)
                     util::formatBytes(double(r.fileBytes)).c_str(),
                     util::formatBytes(double(util::peakResidentMemory())).c_str(),
                     r.computeSeconds, r.totalSeconds, a.job.output.c_str());
+        const raster::RasterStats& st = r.stats;
+        if (st.searchedDistances + st.approximateDistances + st.sweptDistances > 0) {
+            std::printf("  true distances: %llu voxels by foot points, %llu by the lattice search "
+                        "(%llu of them approximate), %llu by fast sweeping\n",
+                        (unsigned long long)st.localDistances,
+                        (unsigned long long)(st.searchedDistances + st.approximateDistances),
+                        (unsigned long long)st.approximateDistances,
+                        (unsigned long long)st.sweptDistances);
+        }
     }
     return 0;
 }

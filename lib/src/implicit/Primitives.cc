@@ -72,6 +72,17 @@ Vec3d Sphere::gradient(const Vec3d& p) const
     return len > 0.0 ? d / len : Vec3d(0.0, 0.0, 1.0);
 }
 
+void Sphere::gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                       double* gz, std::size_t n) const
+{
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d g = gradient(Vec3d(x[i], y[i], z[i])); // inlined: the same arithmetic
+        gx[i] = g[0];
+        gy[i] = g[1];
+        gz[i] = g[2];
+    }
+}
+
 void Sphere::values(const double* x, const double* y, const double* z, double* out,
                     std::size_t n) const
 {

@@ -64,6 +64,7 @@ RasterizeResult rasterize(const RasterizeOptions& opt)
     settings.sampling = opt.sampling;
     if (opt.distance) settings.distance = *opt.distance;
     settings.interrupter = opt.interrupter;
+    settings.stats = &result.stats;
     try {
         result.surface = raster::rasterize(sc.shape, settings);
     } catch (const ParamError& e) {
@@ -85,6 +86,7 @@ RasterizeResult rasterize(const RasterizeOptions& opt)
            << "check the shape and bounds, or use a smaller voxel size; nothing was written";
         OPENVDB_THROW(openvdb::RuntimeError, os.str());
     }
+    settings.stats = nullptr;
     io::stampGrid(*result.surface, opt.scene);
     result.surface->insertMeta("ivdb_scene", openvdb::StringMetadata(sceneAsRasterized(sc, settings)));
     result.surface->insertMeta("ivdb_sampling", openvdb::StringMetadata(

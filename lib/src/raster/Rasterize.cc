@@ -1,21 +1,27 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/raster/Rasterize.h>
 
+#include "Distances.h"
+
+#include <ivdb/levelset/Redistance.h>
+
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
-#include <ivdb/levelset/Redistance.h>
 #include <ivdb/util/Interrupt.h>
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
+#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/LeafManager.h>
 
 #include <tbb/blocked_range.h>
+#include <tbb/concurrent_vector.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -57,17 +63,17 @@ using Int1T = Int2T::ChildNodeType;
 
 enum class Verdict { Outside, Inside, Straddle };
 
-/// Everything the two sampling paths share: the band rule, the per-voxel values and the
-/// final re-distancing, so sparse and dense give the same grid.
+/// Everything the two sampling paths share: the band rule and the per-voxel values, so sparse
+/// and dense give the same grid.
 struct Context
 {
     Implicit::Ptr shape;
     double dx = 0.0;
     double band = 0.0;      // half width in world units, also the background
-    double halfWidthVox = 0.0;
     bool exact = false;     // the shape's value is the exact signed distance
-    int sweepSteps = 0;     // non-exact: voxels kept around the interface for re-distancing
+    int reachSteps = 0;     // non-exact: voxel steps from the interface a band voxel can be
     double reach = 0.0;     // world distance a box is dilated by before the interval test
+    detail::DistanceSettings distances; // non-exact: how true distances are found
     CoordBBox region;       // index box that holds every voxel of the result
     openvdb::util::NullInterrupter* interrupter = nullptr;
     std::uint64_t memoryLimit = 0;
@@ -84,8 +90,8 @@ struct Context
         return BBoxd(w.min() - Vec3d(reach), w.max() + Vec3d(reach));
     }
 
-    /// Can the box hold a voxel of the result? Exact: a band voxel has |f| < band; otherwise
-    /// the result near a voxel depends on f within `reach` of it, so a sign change there.
+    /// Can the box hold a voxel of the result? Exact: a band voxel has |f| < band; otherwise a
+    /// band voxel has the surface within the band: a sign change within `reach` of the box.
     Verdict classify(const Implicit& f, const CoordBBox& b) const
     {
         if (exact) {
@@ -102,22 +108,25 @@ struct Context
         return Verdict::Straddle;
     }
 
-    /// The value stored before re-distancing: f itself for an exact SDF, else f / |grad f|,
-    /// clamped so that far values stay finite.
-    float estimate(const Implicit& f, double value, const Vec3d& p) const
-    {
-        if (exact) return static_cast<float>(value);
-        if (value == 0.0) return 0.0f;
-        const double g = f.gradient(p).length();
-        const double limit = 4.0 * reach;
-        double e = (g > 0.0 && std::isfinite(g)) ? value / g : (value > 0.0 ? limit : -limit);
-        e = std::max(-limit, std::min(limit, e));
-        return static_cast<float>(e);
-    }
-
     /// The band rule, on the stored float value: strictly inside the float background, so
     /// every active value is a distance smaller than the background.
     bool inBand(float v) const { return std::abs(v) < static_cast<float>(band); }
+};
+
+/// Counts of how voxels' distances were found, summed over threads, and the voxels no local
+/// method could answer (left for fast sweeping).
+struct Counts
+{
+    std::atomic<std::uint64_t> local{0}, searched{0}, approximate{0};
+    tbb::concurrent_vector<Coord> unknown;
+    std::atomic<bool> anyInside{false}; // a strictly negative value was seen
+
+    void add(const detail::DistanceCounts& c)
+    {
+        if (c.local) local += c.local;
+        if (c.searched) searched += c.searched;
+        if (c.approximate) approximate += c.approximate;
+    }
 };
 
 /// World coordinates of the 512 voxels of the leaf at @a origin, in leaf offset order.
@@ -134,40 +143,92 @@ void leafPoints(const Coord& origin, double dx, double* x, double* y, double* z)
     }
 }
 
-/// Build the leaf at @a origin from the shape's values, or return null with @a inside telling
-/// whether the leaf would hold only inside voxels (exact) / only one sign (never for non-exact).
-LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, bool& inside)
+/// True distances in place of the values @a v of the leaf at @a origin, for a shape that is not
+/// an exact SDF. Only voxels that can be in the band are solved for: the leaf's 2^3 groups of
+/// voxels whose box, grown by the band, holds a sign change of the shape's interval; the others
+/// keep their value, whose sign is all the band rule uses beyond the band (|value| is raised
+/// to the band).
+void trueDistancesOfLeaf(const Context& ctx, const Implicit& f, const Coord& origin,
+                         const double* x, const double* y, const double* z, double* v,
+                         Counts* counts)
+{
+    alignas(64) double sx[512], sy[512], sz[512], sv[512], d[512];
+    Coord ijk[512];
+    int index[512];
+    int m = 0;
+    const double grow = ctx.band + 1e-9 * ctx.dx;
+    for (int a = 0; a < 8; a += 2)
+    for (int b = 0; b < 8; b += 2)
+    for (int c = 0; c < 8; c += 2) {
+        const Coord lo = origin.offsetBy(a, b, c);
+        const BBoxd w = ctx.worldBox(CoordBBox(lo, lo.offsetBy(1, 1, 1)));
+        const Interval iv = f.interval(BBoxd(w.min() - Vec3d(grow), w.max() + Vec3d(grow)));
+        const bool beyond = iv.lo > 0.0 || iv.hi < 0.0;
+        for (int i = a; i < a + 2; ++i)
+        for (int j = b; j < b + 2; ++j)
+        for (int k = c; k < c + 2; ++k) {
+            const int n = (i << 6) | (j << 3) | k;
+            if (beyond) {
+                // No surface within the band of these voxels.
+                v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
+                continue;
+            }
+            sx[m] = x[n];
+            sy[m] = y[n];
+            sz[m] = z[n];
+            sv[m] = v[n];
+            ijk[m] = origin.offsetBy(i, j, k);
+            index[m++] = n;
+        }
+    }
+    if (m == 0) return;
+    detail::DistanceCounts dc;
+    detail::trueDistances(f, ijk, sx, sy, sz, sv, std::size_t(m), ctx.distances, d, dc);
+    if (counts) counts->add(dc);
+    for (int k = 0; k < m; ++k) v[index[k]] = d[k];
+}
+
+/// Build the leaf at @a origin from the shape's values (exact) or true distances (otherwise),
+/// or return null with @a inside telling whether the leaf holds only inside voxels.
+LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, bool& inside,
+                 Counts* counts)
 {
     alignas(64) double x[512], y[512], z[512], v[512];
     leafPoints(origin, ctx.dx, x, y, z);
     f.values(x, y, z, v, 512);
+    if (!ctx.exact) {
+        if (counts && !counts->anyInside && std::any_of(v, v + 512, [](double a) { return a < 0.0; })) {
+            counts->anyInside = true;
+        }
+        trueDistancesOfLeaf(ctx, f, origin, x, y, z, v, counts);
+    }
     const float bg = static_cast<float>(ctx.band);
     auto leaf = std::make_unique<LeafT>(origin, bg);
     float* buf = leaf->buffer().data();
     auto& mask = leaf->getValueMask();
-    if (ctx.exact) {
-        bool anyActive = false, anyOutside = false;
-        for (int n = 0; n < 512; ++n) {
-            const float fv = static_cast<float>(v[n]);
-            if (ctx.inBand(fv)) {
-                buf[n] = fv;
-                mask.setOn(n);
-                anyActive = true;
-            } else {
-                buf[n] = fv > 0.0f ? bg : -bg;
-                anyOutside = anyOutside || fv > 0.0f;
-            }
+    bool anyActive = false, anyOutside = false;
+    for (int n = 0; n < 512; ++n) {
+        if (std::isnan(v[n])) {
+            // Unknown: fast sweeping decides it later (sweepUnknown); kept active till then.
+            buf[n] = 0.0f;
+            mask.setOn(n);
+            anyActive = true;
+            if (counts) counts->unknown.push_back(leaf->offsetToGlobalCoord(n));
+            continue;
         }
-        if (!anyActive) {
-            inside = !anyOutside;
-            return nullptr;
+        const float fv = static_cast<float>(v[n]);
+        if (ctx.inBand(fv)) {
+            buf[n] = fv;
+            mask.setOn(n);
+            anyActive = true;
+        } else {
+            buf[n] = fv > 0.0f ? bg : -bg;
+            anyOutside = anyOutside || fv > 0.0f;
         }
-    } else {
-        // Every voxel of a candidate leaf takes part in re-distancing (levelset::redistance).
-        for (int n = 0; n < 512; ++n) {
-            buf[n] = ctx.estimate(f, v[n], Vec3d(x[n], y[n], z[n]));
-        }
-        mask.setOn();
+    }
+    if (!anyActive) {
+        inside = !anyOutside;
+        return nullptr;
     }
     return leaf.release();
 }
@@ -178,6 +239,12 @@ struct Level1Result
     Int1T* node = nullptr;  // owned until added to the tree
     bool inside = false;    // the whole level-1 box is an inside tile
 };
+
+/// Voxels a certified true distance may be off (implicit::FootQuery::tolerance).
+constexpr double kDistanceTolerance = 1e-3;
+/// The lattice search's window reaches at most this many voxels (17^3 values a voxel): a wider
+/// band leaves what lies beyond to fast sweeping (sweepUnknown).
+constexpr int kMaxSearchRadius = 8;
 
 /// Blocks between OpenVDB's 128^3 internal nodes and its 8^3 leaves in the descent.
 constexpr int kBlock = 32;
@@ -248,8 +315,8 @@ void checkSparseMemory(const Context& ctx, const std::vector<Task>& level2)
         });
     }
     const double leafCount = sample1 ? level1 * leaves / double(sample1) : 0.0;
-    // A leaf's values and masks; re-distancing (fast sweeping) holds about two more copies.
-    const double perLeaf = double(sizeof(LeafT) + LeafT::SIZE * sizeof(float)) * (ctx.exact ? 1.0 : 3.0);
+    // A leaf's values and masks (true distances are found in place, no copies).
+    const double perLeaf = double(sizeof(LeafT) + LeafT::SIZE * sizeof(float));
     const double need = leafCount * perLeaf + level1 * double(sizeof(Int1T));
     const double limit = util::memoryBudget(ctx.memoryLimit);
     if (need > limit) {
@@ -265,7 +332,8 @@ void checkSparseMemory(const Context& ctx, const std::vector<Task>& level2)
 
 /// The leaves (or inside tiles) of one 32^3 block into @a int1: @a node is the shape pruned to
 /// the block, null when the whole block is inside. Returns true if it added anything.
-bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Implicit* node)
+bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Implicit* node,
+               Counts& counts)
 {
     bool any = false;
     const int d0 = LeafT::DIM;
@@ -277,7 +345,7 @@ bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Imp
             inside = v0 == Verdict::Inside;
             if (v0 == Verdict::Straddle) {
                 const Implicit::Ptr node0 = node->prune(ctx.dilatedWorldBox(box0));
-                if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside)) {
+                if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside, &counts)) {
                     int1.addLeaf(leaf);
                     any = true;
                     return;
@@ -293,7 +361,7 @@ bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Imp
 }
 
 /// One 128^3 node of the sparse path: its 32^3 blocks, then their leaves.
-Level1Result buildLevel1(const Context& ctx, const Task& task)
+Level1Result buildLevel1(const Context& ctx, const Task& task, Counts& counts)
 {
     Level1Result res;
     res.origin = task.origin;
@@ -315,11 +383,11 @@ Level1Result buildLevel1(const Context& ctx, const Task& task)
         CoordBBox part = block;
         part.intersect(sub);
         if (vb == Verdict::Inside) {
-            any = fillBlock(ctx, *int1, part, nullptr) || any;
+            any = fillBlock(ctx, *int1, part, nullptr, counts) || any;
             return;
         }
         const Implicit::Ptr nodeB = node1->prune(ctx.dilatedWorldBox(block));
-        any = fillBlock(ctx, *int1, part, nodeB.get()) || any;
+        any = fillBlock(ctx, *int1, part, nodeB.get(), counts) || any;
     });
     if (any) res.node = int1.release();
     return res;
@@ -350,7 +418,7 @@ void assembleTree(FloatTree& tree, std::vector<Level1Result>& results,
 
 /// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels), with 32^3
 /// blocks between the last two.
-openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
+openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx, Counts& counts)
 {
     const float bg = static_cast<float>(ctx.band);
     auto grid = openvdb::FloatGrid::create(bg);
@@ -384,7 +452,7 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx)
         [&](const tbb::blocked_range<size_t>& r) {
         for (size_t t = r.begin(); t != r.end(); ++t) {
             if (cancelled) return;
-            results[t] = buildLevel1(ctx, tasks[t]);
+            results[t] = buildLevel1(ctx, tasks[t], counts);
             const size_t n = ++done;
             if (util::wasInterrupted(ctx.interrupter, int(100 * n / tasks.size()))) cancelled = true;
         }
@@ -521,8 +589,8 @@ std::vector<std::uint8_t> neededBlocks(const Context& ctx, const DenseSamples& s
         }
     });
     if (ctx.exact) return needed;
-    // Re-distancing needs every voxel within sweepSteps (+1 for its stencil) of the interface.
-    const int nb = (ctx.sweepSteps + 1 + d0 - 1) / d0;
+    // Every voxel within reachSteps (+1) of the interface can be in the band.
+    const int nb = (ctx.reachSteps + 1 + d0 - 1) / d0;
     std::vector<std::uint8_t> grown(blocks.size(), 0);
     for (int bi = 0; bi < blocks.count.x(); ++bi)
     for (int bj = 0; bj < blocks.count.y(); ++bj)
@@ -536,10 +604,27 @@ std::vector<std::uint8_t> neededBlocks(const Context& ctx, const DenseSamples& s
     return grown;
 }
 
-/// A dense-path leaf at @a o from the samples (or the shape, beyond the region), by the same
-/// band rule as buildLeaf().
-LeafT* denseLeaf(const Context& ctx, const DenseSamples& samples, const Coord& o)
+/// The shape as the sparse descent sees it at the leaf at @a o: pruned in turn to the dilated
+/// boxes of its 4096^3 node, 128^3 node, 32^3 block and the leaf itself. True distances depend
+/// on the node's children (not only on its values), so the dense path takes the same nodes.
+Implicit::Ptr prunedForLeaf(const Context& ctx, const Coord& o)
 {
+    Implicit::Ptr node = ctx.shape;
+    for (int dim : {int(Int2T::DIM), int(Int1T::DIM), kBlock, int(LeafT::DIM)}) {
+        const Coord a(alignDown(o.x(), dim), alignDown(o.y(), dim), alignDown(o.z(), dim));
+        node = node->prune(ctx.dilatedWorldBox(CoordBBox::createCube(a, dim)));
+    }
+    return node;
+}
+
+/// A dense-path leaf at @a o: for an exact SDF from the samples (or the shape, beyond the
+/// region) by the same band rule as buildLeaf(); otherwise buildLeaf() itself, on the same node.
+LeafT* denseLeaf(const Context& ctx, const DenseSamples& samples, const Coord& o, Counts& counts)
+{
+    if (!ctx.exact) {
+        bool inside = false;
+        return buildLeaf(ctx, *prunedForLeaf(ctx, o), o, inside, &counts);
+    }
     const float bg = static_cast<float>(ctx.band);
     const int d0 = LeafT::DIM;
     auto leaf = new LeafT(o, bg);
@@ -549,25 +634,20 @@ LeafT* denseLeaf(const Context& ctx, const DenseSamples& samples, const Coord& o
     for (int k = 0; k < d0; ++k, ++n) {
         const int x = o.x() + i, y = o.y() + j, z = o.z() + k;
         const Vec3d p(double(x) * ctx.dx, double(y) * ctx.dx, double(z) * ctx.dx);
-        if (ctx.exact) {
-            const float v = ctx.region.isInside(Coord(x, y, z))
-                                ? samples.at(x, y, z) : static_cast<float>(ctx.shape->value(p));
-            if (ctx.inBand(v)) {
-                buf[n] = v;
-                leaf->setValueOn(n);
-            } else {
-                buf[n] = v > 0.0f ? bg : -bg;
-            }
-        } else {
-            buf[n] = ctx.estimate(*ctx.shape, ctx.shape->value(p), p);
+        const float v = ctx.region.isInside(Coord(x, y, z))
+                            ? samples.at(x, y, z) : static_cast<float>(ctx.shape->value(p));
+        if (ctx.inBand(v)) {
+            buf[n] = v;
             leaf->setValueOn(n);
+        } else {
+            buf[n] = v > 0.0f ? bg : -bg;
         }
     }
     return leaf;
 }
 
 /// Dense path: sample every voxel of the region into an array, then build the same grid.
-openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
+openvdb::FloatGrid::Ptr sampleDense(const Context& ctx, Counts& counts)
 {
     DenseSamples samples(ctx.region);
     samples.sample(ctx);
@@ -577,7 +657,7 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()),
                       [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
-            if (needed[b]) leaves[b] = denseLeaf(ctx, samples, blocks.origin(b));
+            if (needed[b]) leaves[b] = denseLeaf(ctx, samples, blocks.origin(b), counts);
         }
     });
     samples.release();
@@ -592,6 +672,50 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx)
     // Inside tiles: the dense path has no intervals, so the sign spreads from the band.
     openvdb::tools::signedFloodFill(grid->tree());
     return grid;
+}
+
+/// The last resort, for voxels no local method answered (a band wider than the lattice window,
+/// and the surface beyond the window: deep inside near a medial axis, typically): the old way,
+/// fast sweeping from first-order estimates f / |grad f| (levelset::redistance), but only over
+/// those voxels grown by the band, so it costs what they need.
+void sweepUnknown(const Context& ctx, openvdb::FloatGrid& grid, const std::vector<Coord>& unknown)
+{
+    openvdb::MaskTree region;
+    for (const Coord& c : unknown) region.setValueOn(c);
+    openvdb::tools::dilateActiveValues(region, ctx.reachSteps + 2,
+                                       openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
+    auto samples = openvdb::FloatGrid::create(static_cast<float>(ctx.band));
+    samples->setTransform(grid.transform().copy());
+    samples->tree().topologyUnion(region);
+    openvdb::tree::LeafManager<FloatTree> leaves(samples->tree());
+    const double limit = 4.0 * ctx.reach;
+    leaves.foreach([&](LeafT& leaf, size_t) {
+        alignas(64) double x[512], y[512], z[512], v[512], gx[512], gy[512], gz[512];
+        leafPoints(leaf.origin(), ctx.dx, x, y, z);
+        ctx.shape->values(x, y, z, v, 512);
+        ctx.shape->gradients(x, y, z, gx, gy, gz, 512);
+        for (auto it = leaf.beginValueOn(); it; ++it) {
+            const int n = int(it.pos());
+            const double g = std::sqrt(gx[n] * gx[n] + gy[n] * gy[n] + gz[n] * gz[n]);
+            double e = g > 0.0 && std::isfinite(g) ? v[n] / g : (v[n] > 0.0 ? limit : -limit);
+            e = std::max(-limit, std::min(limit, e));
+            it.setValue(static_cast<float>(e));
+        }
+    });
+    const openvdb::FloatGrid::Ptr swept =
+        levelset::redistance(*samples, ctx.band / ctx.dx, ctx.interrupter);
+    openvdb::tree::ValueAccessor<FloatTree> out(grid.tree());
+    openvdb::tree::ValueAccessor<const FloatTree> in(swept->tree()), est(samples->tree());
+    const float bg = static_cast<float>(ctx.band);
+    for (const Coord& c : unknown) {
+        float v;
+        if (in.probeValue(c, v) && ctx.inBand(v)) {
+            out.setValueOn(c, v);
+        } else {
+            out.setValueOff(c, est.getValue(c) > 0.0f ? bg : -bg);
+        }
+    }
 }
 
 } // namespace
@@ -638,7 +762,6 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
             "to the scene to clip it to a box");
     }
     ctx.dx = s.voxelSize;
-    ctx.halfWidthVox = s.halfWidth;
     ctx.band = s.halfWidth * s.voxelSize;
     ctx.exact = ctx.shape->isExactSdf();
     if (s.distance == Distance::Bound && !ctx.exact) {
@@ -659,10 +782,16 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         // A voxel v at distance d < halfWidth from its closest surface point s is within
         // Chebyshev distance d of s, and s lies in a lattice cube whose corners (Chebyshev
         // distance <= 1 from s) include a voxel next to a sign change: so v is within
-        // ceil(halfWidth) steps of that voxel. The samples must reach one more voxel for the
-        // interface test, and a Chebyshev step stretches to sqrt(3) along a diagonal.
-        ctx.sweepSteps = int(std::ceil(s.halfWidth));
-        ctx.reach = (ctx.sweepSteps * std::sqrt(3.0) + 2.0) * ctx.dx;
+        // ceil(halfWidth) steps of that voxel (the dense path's block rule).
+        ctx.reachSteps = int(std::ceil(s.halfWidth));
+        // The lattice search looks one voxel beyond the band; the pruned node must hold there.
+        ctx.distances.dx = ctx.dx;
+        ctx.distances.searchRadius = std::min(ctx.reachSteps + 1, kMaxSearchRadius);
+        ctx.distances.far = ctx.band + ctx.dx;
+        ctx.distances.tolerance = kDistanceTolerance * ctx.dx;
+        // The band's straddle test and the pruned nodes must cover the search's window (an
+        // axis-aligned cube of searchRadius voxels around each voxel of the box).
+        ctx.reach = std::max(ctx.band, ctx.distances.searchRadius * ctx.dx) + 0.25 * ctx.dx;
     }
     const BBoxd b = ctx.shape->boundingBox();
     const double maxIndex = double(1 << 30);
@@ -724,12 +853,24 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
         }
     }
 
+    Counts counts;
     auto run = [&]() {
         util::InterruptScope scope(ctx.interrupter, "Rasterizing");
         openvdb::FloatGrid::Ptr grid = settings.sampling == Sampling::Dense
-                                           ? sampleDense(ctx)
-                                           : sampleSparse(ctx);
-        if (!ctx.exact) grid = levelset::redistance(*grid, ctx.halfWidthVox, ctx.interrupter);
+                                           ? sampleDense(ctx, counts)
+                                           : sampleSparse(ctx, counts);
+        if (!ctx.exact && !counts.anyInside) {
+            // Zeros but no inside (the point x^2 + y^2 + z^2 = 0, the double plane x^2 = 0): a
+            // zero set without area is no surface.
+            grid->clear();
+            counts.unknown.clear();
+        }
+        if (!counts.unknown.empty()) {
+            // In a fixed order, so that both paths and every run sweep the same way.
+            std::vector<Coord> unknown(counts.unknown.begin(), counts.unknown.end());
+            std::sort(unknown.begin(), unknown.end());
+            sweepUnknown(ctx, *grid, unknown);
+        }
         openvdb::tools::pruneLevelSet(grid->tree());
         scope.end();
         return grid;
@@ -743,6 +884,12 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
     }
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
     grid->setName("surface");
+    if (settings.stats) {
+        settings.stats->localDistances = counts.local;
+        settings.stats->searchedDistances = counts.searched;
+        settings.stats->approximateDistances = counts.approximate;
+        settings.stats->sweptDistances = counts.unknown.size();
+    }
     return grid;
 }
 

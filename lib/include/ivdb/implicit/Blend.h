@@ -32,6 +32,8 @@ public:
     Vec3d gradient(const Vec3d& p) const override;
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
+    void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                   double* gz, std::size_t n) const override;
     /// Exact for a blend of exact intervals: the blend is monotone in every child.
     Interval interval(const BBoxd& box) const override;
     /// Union: the children's boxes grown by ln(n)/p when every child is an exact SDF (the blend

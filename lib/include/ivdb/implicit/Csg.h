@@ -25,6 +25,11 @@ public:
     Vec3d gradient(const Vec3d& p) const override;
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
+    /// The children's foot points: outside every term (or where the deciding term leads the
+    /// next by its own depth) the nearest; near a crease inside, the nearest of the children's
+    /// foot points and the points of the creases of two children that lie outside the others.
+    void footPoints(const double* x, const double* y, const double* z, const double* values,
+                    std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
     BBoxd boundingBox() const override;
     bool isExactSdf() const override;
@@ -53,6 +58,10 @@ public:
     Vec3d gradient(const Vec3d& p) const override;
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
+    /// Rigid motion and uniform scale: the child's foot points mapped back; a non-uniform scale
+    /// iterates on this node's own field.
+    void footPoints(const double* x, const double* y, const double* z, const double* values,
+                    std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
     BBoxd boundingBox() const override;
     bool isExactSdf() const override;

@@ -23,6 +23,27 @@ BBoxd infiniteBox();
 /// @brief True if every coordinate of @a box is finite.
 bool isFinite(const BBoxd& box);
 
+/// @brief What footPoints() is asked for.
+struct FootQuery
+{
+    /// World units: a point reported as certified has a distance within this of the true one.
+    double tolerance = 1e-6;
+    /// World units: a point farther than this from the surface only needs to be reported as
+    /// farther (its sign and a distance >= far; no foot point).
+    double far = 1.0;
+    /// False: only the distances are needed, a node may leave the foot points at the query
+    /// points where finding them would cost more.
+    bool feet = true;
+};
+
+/// @brief Signed distances and the surface points they are measured to, for a batch of points.
+struct FootPoints
+{
+    double distance[kMaxBatch];   ///< signed distance to the surface, negative inside
+    double x[kMaxBatch], y[kMaxBatch], z[kMaxBatch]; ///< the foot point (the closest surface point)
+    bool ok[kMaxBatch];           ///< certified; false: no local method worked at this point
+};
+
 /// @brief An implicit function f: R^3 -> R, negative inside, zero on the surface.
 /// @details Nodes are immutable and shared (a tree of Implicit::Ptr). Besides the value, a node
 /// gives its analytic gradient, a conservative interval of its values over a box (what lets the
@@ -43,6 +64,25 @@ public:
     /// compiler can vectorize, so a virtual call is paid per batch, not per point.
     virtual void values(const double* x, const double* y, const double* z, double* out,
                         std::size_t n) const;
+    /// @brief Gradients at @a n <= kMaxBatch points: the same as gradient() at each point.
+    virtual void gradients(const double* x, const double* y, const double* z, double* gx,
+                           double* gy, double* gz, std::size_t n) const;
+    /// @brief True signed distances to the surface at @a n <= kMaxBatch points, found locally,
+    /// with their foot points (docs/method.md#true-distances).
+    /// @details @a values are value() at the points. An exact SDF returns its values and the
+    /// points moved along its unit gradient. Other smooth shapes take Newton steps onto the
+    /// surface along the gradient, each followed by a move of the point along the tangent plane
+    /// towards the foot of the perpendicular from the query point, until both are converged
+    /// far below the tolerance (so the distances are a smooth function of the point: curvature
+    /// from their second differences stays smooth), and certify the result when it lies on the
+    /// surface and the query point on its normal (within the tolerance), and the distance
+    /// agrees with the first-order estimate f / |grad f| within 25%. CSG nodes override it
+    /// (exact children, the crease between two children).
+    /// Points where no local method is certified (a singular point, a medial axis, a thin
+    /// feature) get ok = false and the first-order estimate as their distance.
+    virtual void footPoints(const double* x, const double* y, const double* z,
+                            const double* values, std::size_t n, const FootQuery& query,
+                            FootPoints& out) const;
     /// @brief An interval that contains f(p) for every p in @a box.
     virtual Interval interval(const BBoxd& box) const = 0;
     /// @brief A box outside which the shape has no inside points (infiniteBox() if unbounded).
@@ -58,5 +98,11 @@ public:
     /// @brief True if the shape has a finite bounding box.
     bool isBounded() const { return isFinite(boundingBox()); }
 };
+
+/// @brief The foot point of @a p on the surface of @a f near @a start (a point on or near the
+/// surface), by the smooth iteration of Implicit::footPoints started at @a start instead of at
+/// the projection of @a p.
+/// @return true, with @a q, if certified: q on the surface and p on its normal within @a tol
+bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q);
 
 } // namespace ivdb::implicit

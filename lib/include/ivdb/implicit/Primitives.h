@@ -16,6 +16,8 @@ public:
     Vec3d gradient(const Vec3d& p) const override;
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
+    void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                   double* gz, std::size_t n) const override;
     Interval interval(const BBoxd& box) const override;
     BBoxd boundingBox() const override;
     bool isExactSdf() const override { return true; }

@@ -26,6 +26,12 @@ public:
     Vec3d gradient(const Vec3d& p) const override;
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
+    void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                   double* gz, std::size_t n) const override;
+    /// The foot point solves one equation in the Lagrange multiplier, in the eigenframe of A
+    /// (docs/method.md#true-distances): Newton's method converges quadratically, to rounding.
+    void footPoints(const double* x, const double* y, const double* z, const double* values,
+                    std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
     /// Finite only when A is positive definite (an ellipsoid, or empty).
     BBoxd boundingBox() const override;
@@ -38,10 +44,15 @@ public:
     bool isEmpty() const { return mIsEmpty; }
 
 private:
+    void prepareFootPoints();
+
     Mat4 mQ;
     BBoxd mBox;
     bool mIsPlaneSdf = false;
     bool mIsEmpty = false;
+    // A = F diag(mEigen) F^T (F's columns the eigenvectors), and F^T b, for footPoints().
+    double mFrame[3][3] = {}, mEigen[3] = {}, mLinear[3] = {};
+    bool mHasFrame = false;
 };
 
 /// @brief The rotation (columns: images of local x, y, z) that takes +z onto @a axis by the

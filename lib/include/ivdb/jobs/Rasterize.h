@@ -43,6 +43,7 @@ struct RasterizeResult
     double computeSeconds = 0.0;      ///< reading the scene and rasterizing
     double totalSeconds = 0.0;        ///< everything, writing included
     std::uint64_t fileBytes = 0;      ///< the output's size (0 without output)
+    raster::RasterStats stats;        ///< how true distances were found (shapes not exact SDFs)
 };
 
 /// @brief Rasterize a scene file into a level set (and a fog volume), stamped with the scene as

@@ -35,6 +35,21 @@ enum class Distance
     Bound
 };
 
+/// @brief How the voxels' distances of a shape that is not an exact SDF were found.
+struct RasterStats
+{
+    /// Voxels whose distance the shape's own local method certified (implicit::footPoints).
+    std::uint64_t localDistances = 0;
+    /// Voxels where it did not, found by the lattice search and certified after refinement.
+    std::uint64_t searchedDistances = 0;
+    /// Voxels found by the lattice search whose refinement was not certified: the distance to
+    /// the nearest crossing of the voxel lattice's edges (a crease or singular point).
+    std::uint64_t approximateDistances = 0;
+    /// Voxels no local method answered (the surface beyond the search's window in a wide band),
+    /// re-distanced by fast sweeping over just those voxels' neighbourhood.
+    std::uint64_t sweptDistances = 0;
+};
+
 struct RasterSettings
 {
     /// World units per voxel; must be > 0.
@@ -54,6 +69,8 @@ struct RasterSettings
     /// Memory the rasterizer may use, in bytes (dense: its sample array; sparse: its estimated
     /// leaves); 0 means 80% of the machine's available memory.
     std::uint64_t memoryLimit = 0;
+    /// If set, receives how the distances were found.
+    RasterStats* stats = nullptr;
 };
 
 /// @brief Rasterize @a shape into a narrow-band level set.
@@ -61,9 +78,11 @@ struct RasterSettings
 /// transform of the voxel size (voxel (i,j,k) at world (i,j,k) * voxelSize), background
 /// halfWidth * voxelSize, active voxels exactly those whose signed distance is within the band
 /// (|d| < background), negative inside (inactive voxels and tiles -background). Shapes whose
-/// value is an exact distance are stored as is (rounded to float); others (quadrics, CSG) are
-/// estimated as f / |grad f| next to the surface and re-distanced by fast sweeping.
-/// Sparse and dense sampling give the same active voxels and values.
+/// value is an exact distance are stored as is (rounded to float); for the others (quadrics,
+/// CSG, blends, non-uniform scales) each voxel near the surface gets its true distance, found
+/// locally: the shape's own foot points (Implicit::footPoints), else a search of the voxel
+/// lattice around it (docs/method.md#true-distances). Sparse and dense sampling give the same
+/// active voxels and values.
 /// @throw ParamError for a bad voxel size or half width
 /// @throw openvdb::ValueError for an unbounded shape without bounds
 /// @throw openvdb::RuntimeError if dense sampling would not fit in memory

@@ -1,0 +1,429 @@
+// SPDX-License-Identifier: Apache-2.0
+// True distances found locally (docs/method.md#true-distances): foot points on the surface of
+// exact SDFs, of smooth fields (Newton steps), and of CSG nodes (their children's foot points,
+// and the crease where two children meet).
+#include <ivdb/implicit/Csg.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <initializer_list>
+#include <limits>
+#include <memory>
+#include <vector>
+
+namespace ivdb::implicit {
+
+namespace {
+
+/// The smooth-field iteration (and the crease iteration) repeats its round (a projection onto
+/// the surface along the gradient, then a move towards the foot of the perpendicular; the
+/// tangential error shrinks by about kappa d a round) until the point is on the surface and
+/// the query point on its normal within kConverged of the tolerance, at most kMaxRounds times.
+/// Converging that far, not stopping at the tolerance, keeps the distances a smooth function of
+/// the query point: neighbours that stop after different numbers of rounds differ by far less
+/// than a voxel's second differences can see (curvature stays smooth).
+constexpr int kMaxRounds = 12;
+constexpr double kConverged = 1e-4;
+/// A certified distance agrees with the first-order estimate f / |grad f| within this share:
+/// a larger gap means the iteration went to another part of the surface (a medial axis) or
+/// past a singular point, where the local answer cannot be trusted.
+constexpr double kEstimateAgreement = 0.25;
+
+double dot(const Vec3d& a, const Vec3d& b) { return a.dot(b); }
+
+/// Foot points of an exact SDF: its value, and the point moved back along its unit gradient.
+void exactFootPoints(const Implicit& f, const double* x, const double* y, const double* z,
+                     const double* values, std::size_t n, FootPoints& out)
+{
+    double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch];
+    f.gradients(x, y, z, gx, gy, gz, n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const double v = values[i];
+        const double len = std::sqrt(gx[i] * gx[i] + gy[i] * gy[i] + gz[i] * gz[i]);
+        out.distance[i] = v;
+        // A unit gradient, as an exact SDF has wherever its gradient is defined.
+        out.ok[i] = len > 0.5 && len < 1.5;
+        const double s = out.ok[i] ? v / len : 0.0;
+        out.x[i] = x[i] - s * gx[i];
+        out.y[i] = y[i] - s * gy[i];
+        out.z[i] = z[i] - s * gz[i];
+    }
+}
+
+} // namespace
+
+void Implicit::gradients(const double* x, const double* y, const double* z, double* gx,
+                         double* gy, double* gz, std::size_t n) const
+{
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d g = gradient(Vec3d(x[i], y[i], z[i]));
+        gx[i] = g[0];
+        gy[i] = g[1];
+        gz[i] = g[2];
+    }
+}
+
+// GCC cannot see that only the m entries written are read.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+void Implicit::footPoints(const double* x, const double* y, const double* z,
+                          const double* values, std::size_t n, const FootQuery& query,
+                          FootPoints& out) const
+{
+    if (isExactSdf()) {
+        exactFootPoints(*this, x, y, z, values, n, out);
+        return;
+    }
+    double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch];
+    gradients(x, y, z, gx, gy, gz, n);
+    // The points that iterate, compacted: index, query point, current point.
+    std::size_t idx[kMaxBatch];
+    double px[kMaxBatch], py[kMaxBatch], pz[kMaxBatch], qx[kMaxBatch], qy[kMaxBatch],
+        qz[kMaxBatch], f[kMaxBatch], hx[kMaxBatch], hy[kMaxBatch], hz[kMaxBatch];
+    std::size_t m = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const double v = values[i], g2 = gx[i] * gx[i] + gy[i] * gy[i] + gz[i] * gz[i];
+        out.x[i] = x[i];
+        out.y[i] = y[i];
+        out.z[i] = z[i];
+        out.ok[i] = false;
+        if (!(g2 > 0.0) || !std::isfinite(g2)) {
+            // No gradient (a singular point): no local answer.
+            out.distance[i] = v > 0.0 ? query.far : -query.far;
+            continue;
+        }
+        const double e = v / std::sqrt(g2); // the first-order estimate
+        out.distance[i] = e;
+        if (v == 0.0 || std::abs(e) >= 2.0 * query.far) {
+            // On the surface, or far enough that only "farther" matters: the estimate's error is
+            // second order in the distance, a factor 2 only where the surface curves within it.
+            out.ok[i] = true;
+            continue;
+        }
+        idx[m] = i;
+        px[m] = x[i];
+        py[m] = y[i];
+        pz[m] = z[i];
+        qx[m] = x[i] - v * gx[i] / g2;
+        qy[m] = y[i] - v * gy[i] / g2;
+        qz[m] = z[i] - v * gz[i] / g2;
+        ++m;
+    }
+    const double converged = kConverged * query.tolerance;
+    for (int round = 0; m > 0; ++round) {
+        this->values(qx, qy, qz, f, m);
+        gradients(qx, qy, qz, hx, hy, hz, m);
+        const bool last = round + 1 == kMaxRounds;
+        std::size_t kept = 0;
+        for (std::size_t k = 0; k < m; ++k) {
+            const Vec3d h(hx[k], hy[k], hz[k]), p(px[k], py[k], pz[k]);
+            Vec3d q(qx[k], qy[k], qz[k]);
+            const double h2 = h.lengthSqr();
+            if (!(h2 > 0.0) || !std::isfinite(h2)) continue; // no gradient: not certified
+            const double hl = std::sqrt(h2);
+            const Vec3d r = p - q, nrm = h / hl;
+            const double off = std::abs(f[k]) / hl, tangential = (r - nrm * dot(r, nrm)).length();
+            if ((off <= converged && tangential <= converged) || last) {
+                // Certify q: on the surface, p on its normal, and the distance near the
+                // first-order estimate.
+                const std::size_t i = idx[k];
+                const double d = std::copysign(r.length(), values[i]), e = out.distance[i];
+                if (off <= query.tolerance && tangential <= query.tolerance &&
+                    std::abs(d - e) <= kEstimateAgreement * std::abs(e) + query.tolerance) {
+                    out.distance[i] = d;
+                    out.x[i] = q[0];
+                    out.y[i] = q[1];
+                    out.z[i] = q[2];
+                    out.ok[i] = true;
+                }
+                continue;
+            }
+            // Onto the surface along the gradient, then along the tangent plane towards the
+            // foot of the perpendicular from p.
+            q -= h * (f[k] / h2);
+            const Vec3d t = p - q;
+            q += t - h * (dot(t, h) / h2);
+            idx[kept] = idx[k];
+            px[kept] = px[k];
+            py[kept] = py[k];
+            pz[kept] = pz[k];
+            qx[kept] = q[0];
+            qy[kept] = q[1];
+            qz[kept] = q[2];
+            ++kept;
+        }
+        m = kept;
+    }
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
+bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
+{
+    q = start;
+    for (int round = 0; round < kMaxRounds; ++round) {
+        const double v = f.value(q);
+        const Vec3d h = f.gradient(q);
+        const double h2 = h.lengthSqr();
+        if (!(h2 > 0.0) || !std::isfinite(h2)) return false;
+        const double hl = std::sqrt(h2);
+        const Vec3d r = p - q, nrm = h / hl;
+        const double off = std::abs(v) / hl, tangential = (r - nrm * dot(r, nrm)).length();
+        if (off <= kConverged * tol && tangential <= kConverged * tol) return true;
+        if (round + 1 == kMaxRounds) return off <= tol && tangential <= tol;
+        q -= h * (v / h2);
+        const Vec3d t = p - q;
+        q += t - h * (dot(t, h) / h2);
+    }
+    return false;
+}
+
+namespace {
+
+/// The point of the crease {a = 0} and {b = 0} closest to @a p, from @a start: rounds of a
+/// Gauss-Newton step onto both surfaces (the smallest move that zeroes both linearized values)
+/// and a move along the crease's tangent to the foot of the perpendicular from p, until
+/// converged (kConverged). Certified when q is on both surfaces and p - q is perpendicular to
+/// the crease, within @a tol.
+bool creasePoint(const Implicit& a, const Implicit& b, const Vec3d& p, Vec3d q, double tol,
+                 Vec3d& out)
+{
+    for (int round = 0; round < kMaxRounds; ++round) {
+        const double fa = a.value(q), fb = b.value(q);
+        const Vec3d ga = a.gradient(q), gb = b.gradient(q);
+        const double aa = dot(ga, ga), ab = dot(ga, gb), bb = dot(gb, gb);
+        const double det = aa * bb - ab * ab; // |ga x gb|^2
+        if (!(det > 1e-12 * aa * bb) || !std::isfinite(det)) return false; // tangent surfaces
+        Vec3d t = ga.cross(gb);
+        t /= std::sqrt(det);
+        const double offA = std::abs(fa) / std::sqrt(aa), offB = std::abs(fb) / std::sqrt(bb);
+        const double along = std::abs(dot(p - q, t));
+        out = q;
+        const double c = kConverged * tol;
+        if (offA <= c && offB <= c && along <= c) return true;
+        if (round + 1 == kMaxRounds) return offA <= tol && offB <= tol && along <= tol;
+        const double la = (fa * bb - fb * ab) / det, lb = (fb * aa - fa * ab) / det;
+        q -= ga * la + gb * lb;
+        q += t * dot(p - q, t);
+    }
+    return false;
+}
+
+} // namespace
+
+namespace {
+
+/// The point where the surfaces of @a f[0..2] meet nearest @a start: Newton's method on the
+/// three values (a 3x3 system a step). Certified when q is on all three within @a tol.
+bool cornerPoint(const std::array<const Implicit*, 3>& f, Vec3d q, double tol, Vec3d& out)
+{
+    for (int round = 0; round < kMaxRounds; ++round) {
+        Vec3d g[3];
+        double v[3], off = 0.0;
+        for (int k = 0; k < 3; ++k) {
+            v[k] = f[k]->value(q);
+            g[k] = f[k]->gradient(q);
+            const double gl = g[k].length();
+            if (!(gl > 0.0)) return false;
+            off = std::max(off, std::abs(v[k]) / gl);
+        }
+        out = q;
+        if (off <= kConverged * tol) return true;
+        if (round + 1 == kMaxRounds) return off <= tol;
+        // Solve [g0; g1; g2] dq = v by Cramer's rule.
+        const double det = g[0].dot(g[1].cross(g[2]));
+        if (!(std::abs(det) > 1e-12 * g[0].length() * g[1].length() * g[2].length())) return false;
+        const Vec3d dq = (g[1].cross(g[2]) * v[0] + g[2].cross(g[0]) * v[1] +
+                          g[0].cross(g[1]) * v[2]) / det;
+        q -= dq;
+    }
+    return false;
+}
+
+} // namespace
+
+void Csg::footPoints(const double* x, const double* y, const double* z, const double* values,
+                     std::size_t n, const FootQuery& query, FootPoints& out) const
+{
+    const std::size_t nc = mChildren.size();
+    if (nc == 1) {
+        mChildren[0]->footPoints(x, y, z, values, n, query, out);
+        return;
+    }
+    // In terms t_c = s_c f_c the node is rho * min_c t_c: a union of the sets {t_c < 0} (rho =
+    // 1), or the complement of one (rho = -1: an intersection is the complement of the union of
+    // the children's outsides, a difference A - B of A's outside and B). The surface, and so the
+    // distance up to its sign, is that of the union.
+    auto termSign = [this](std::size_t c) {
+        return mOp == Op::Union ? 1.0 : mOp == Op::Intersection ? -1.0 : (c == 0 ? -1.0 : 1.0);
+    };
+    const double rho = mOp == Op::Union ? 1.0 : -1.0;
+    // Each child's distances: an exact SDF's are its values (its foot points are found only
+    // where a crease needs them); the others' come from their own foot points.
+    std::vector<std::array<double, kMaxBatch>> childValues(nc);
+    std::vector<std::unique_ptr<FootPoints>> feet(nc);
+    for (std::size_t c = 0; c < nc; ++c) {
+        mChildren[c]->values(x, y, z, childValues[c].data(), n);
+        if (mChildren[c]->isExactSdf()) continue;
+        feet[c] = std::make_unique<FootPoints>();
+        FootQuery childQuery = query;
+        childQuery.feet = true; // the creases start from them
+        mChildren[c]->footPoints(x, y, z, childValues[c].data(), n, childQuery, *feet[c]);
+    }
+    auto distanceOf = [&](std::size_t c, std::size_t i) {
+        return feet[c] ? feet[c]->distance[i] : childValues[c][i];
+    };
+    auto footOf = [&](std::size_t c, std::size_t i, Vec3d& q) {
+        if (feet[c]) {
+            q = Vec3d(feet[c]->x[i], feet[c]->y[i], feet[c]->z[i]);
+            return feet[c]->ok[i];
+        }
+        const Vec3d p(x[i], y[i], z[i]), g = mChildren[c]->gradient(p);
+        const double len = g.length();
+        q = p - g * (len > 0.0 ? childValues[c][i] / len : 0.0);
+        return len > 0.5 && len < 1.5; // an exact SDF's gradient is a unit vector
+    };
+    // Outside every term at q, within the tolerance (the terms in @a on excepted).
+    auto outsideOthers = [&](const Vec3d& q, std::initializer_list<std::size_t> on) {
+        for (std::size_t c = 0; c < nc; ++c) {
+            if (std::find(on.begin(), on.end(), c) != on.end()) continue;
+            if (termSign(c) * mChildren[c]->value(q) < -query.tolerance) return false;
+        }
+        return true;
+    };
+    std::vector<std::size_t> nearTerms;
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d p(x[i], y[i], z[i]);
+        // The deciding term (by distance) and the next.
+        std::size_t first = 0;
+        double u = termSign(0) * distanceOf(0, i), second = std::numeric_limits<double>::max();
+        bool allOk = !feet[0] || feet[0]->ok[i];
+        for (std::size_t c = 1; c < nc; ++c) {
+            const double d = termSign(c) * distanceOf(c, i);
+            allOk = allOk && (!feet[c] || feet[c]->ok[i]);
+            if (d < u) {
+                second = u;
+                u = d;
+                first = c;
+            } else if (d < second) {
+                second = d;
+            }
+        }
+        out.distance[i] = rho * u;
+        out.ok[i] = allOk;
+        // Outside every term, the nearest term's distance is the distance to the union; inside,
+        // so is the deciding term's as long as no other term comes within it (its foot point
+        // then lies outside the others: they are 1-Lipschitz). Also beyond the range asked for.
+        if (!allOk || u >= 0.0 || second >= -u || -u >= query.far) {
+            Vec3d q = p;
+            if (query.feet && !footOf(first, i, q)) out.ok[i] = false;
+            out.x[i] = q[0];
+            out.y[i] = q[1];
+            out.z[i] = q[2];
+            continue;
+        }
+
+        // Inside, near a crease: the nearest point of the union's surface is a term's foot point,
+        // a point of the crease of two terms or a corner of three, that lies outside every
+        // other term. Only terms whose surface is within reach can offer one.
+        nearTerms.clear();
+        for (std::size_t c = 0; c < nc; ++c) {
+            if (termSign(c) * distanceOf(c, i) < query.far) nearTerms.push_back(c);
+        }
+        double best = std::numeric_limits<double>::max();
+        Vec3d foot = p;
+        bool complete = true; // every candidate was found
+        auto offer = [&](const Vec3d& q) {
+            const double d = (p - q).length();
+            if (d < best) best = d, foot = q;
+        };
+        for (std::size_t c : nearTerms) {
+            Vec3d q;
+            if (!footOf(c, i, q)) complete = false;
+            else if (outsideOthers(q, {c})) offer(q);
+        }
+        // A crease (or corner) point q of terms a and b is |p - q| >= |d_a| and >= |d_b| away
+        // (the distance to each surface is at most that): only pairs nearer than the best so
+        // far can offer a better one.
+        auto within = [&](std::size_t c) { return std::abs(distanceOf(c, i)) < best; };
+        for (std::size_t a = 0; a < nearTerms.size(); ++a) {
+            for (std::size_t b = a + 1; b < nearTerms.size(); ++b) {
+                const std::size_t ca = nearTerms[a], cb = nearTerms[b];
+                if (!within(ca) || !within(cb)) continue;
+                Vec3d start, q;
+                footOf(ca, i, start);
+                if (!creasePoint(*mChildren[ca], *mChildren[cb], p, start, query.tolerance, q)) {
+                    complete = false;
+                    continue;
+                }
+                if (outsideOthers(q, {ca, cb})) offer(q);
+                // Where a third surface cuts this crease near q: a corner.
+                for (std::size_t k = b + 1; k < nearTerms.size(); ++k) {
+                    const std::size_t cc = nearTerms[k];
+                    if (!within(cc)) continue;
+                    Vec3d corner;
+                    if (cornerPoint({mChildren[ca].get(), mChildren[cb].get(), mChildren[cc].get()},
+                                    q, query.tolerance, corner) &&
+                        outsideOthers(corner, {ca, cb, cc})) {
+                        offer(corner);
+                    }
+                }
+            }
+        }
+        // Certified if every candidate was found, or the best reaches the lower bound |u| of the
+        // distance (inside the union the distance is at least the deepest term's depth).
+        out.ok[i] = best < std::numeric_limits<double>::max() &&
+                    (complete || best <= -u + query.tolerance);
+        const double depth = std::min(best, query.far);
+        out.distance[i] = rho * -depth;
+        out.x[i] = foot[0];
+        out.y[i] = foot[1];
+        out.z[i] = foot[2];
+    }
+}
+
+// GCC cannot see that the child reads only the n entries written below.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+void Transform::footPoints(const double* x, const double* y, const double* z,
+                           const double* values, std::size_t n, const FootQuery& query,
+                           FootPoints& out) const
+{
+    if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2])) {
+        // A non-uniform scale is not a rigid motion: the field itself, by the smooth iteration.
+        Implicit::footPoints(x, y, z, values, n, query, out);
+        return;
+    }
+    // Rigid motion and uniform scale: the child's foot points, mapped.
+    double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch], local[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
+        qx[i] = q[0];
+        qy[i] = q[1];
+        qz[i] = q[2];
+        local[i] = values[i] / mValueScale;
+    }
+    FootQuery childQuery = query;
+    childQuery.tolerance = query.tolerance / mValueScale;
+    childQuery.far = query.far / mValueScale;
+    mChild->footPoints(qx, qy, qz, local, n, childQuery, out);
+    for (std::size_t i = 0; i < n; ++i) {
+        out.distance[i] *= mValueScale;
+        const Vec3d w = toWorld(Vec3d(out.x[i], out.y[i], out.z[i]));
+        out.x[i] = w[0];
+        out.y[i] = w[1];
+        out.z[i] = w[2];
+    }
+}
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
+} // namespace ivdb::implicit
