@@ -16,7 +16,14 @@ Section "csg" (two overlapping radius-400 spheres; also rendering one of them vs
 Section "diff" (gradient and mean curvature of the radius-400 sphere):
   * compute: diff::gradient / diff::curvature vs openvdb::tools::gradient / meanCurvature;
   * end to end: `ivdb gradient|curvature IN -o OUT` vs `vdb_tool -read IN -grad|-curvature -write OUT`.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|all] [--reps N] [--quick]
+Section "distances" (true distances of shapes that are not exact SDFs, docs/method.md):
+  * compute and peak memory of `ivdb rasterize` (its own compute figure, median of interleaved
+    runs) for a sphere, the same sphere as a quadric, an ellipsoid, the union and the blend of two
+    spheres and a union of 1000 spheres, each CSG scene in both distance modes, per active voxel
+    against the exact sphere; OpenVDB's route (createLevelSetSphere per sphere + csgUnion) for the
+    unions, measured by `ivdb bench-run` in the same run.
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|all]
+[--reps N] [--quick]
 """
 import argparse
 import json
@@ -71,7 +78,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
-    ap.add_argument("--section", choices=["core", "csg", "diff", "all"], default="all")
+    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "all"], default="all")
     args = ap.parse_args()
     reps = 3 if args.quick else args.reps
     big = 200 if args.quick else 400
@@ -84,6 +91,8 @@ def main():
             bench_diff(tmp, big, reps)
         if args.section in ("core", "all"):
             bench_core(tmp, big, reps, args.quick)
+        if args.section in ("distances", "all"):
+            bench_distances(tmp, reps, args.quick)
 
 
 def gbench_medians(pattern, reps):
@@ -224,6 +233,70 @@ def bench_core(tmp, big, reps, quick):
     for r, ms in rows:
         print(f"| {r} | {ms:.1f} ms | {f'{ms / prev:.2f}' if prev else '-'} |")
         prev = ms
+
+
+def bench_distances(tmp, reps, quick):
+    import random
+    k = 4 if quick else 1  # --quick: voxels 4x larger
+    sph = lambda c, r: {"type": "sphere", "center": c, "radius": r}
+    two = [sph([-0.35, 0, 0], 0.6), sph([0.35, 0, 0], 0.6)]
+    rng = random.Random(20261201)
+    many = [sph([rng.uniform(-1, 1) for _ in range(3)], rng.uniform(0.05, 0.15)) for _ in range(1000)]
+    scenes = [  # name, shape, voxel size, distance mode, OpenVDB route
+        ("sphere radius 1 (exact)", sph([0, 0, 0], 1), 0.0025, None, False),
+        ("sphere as a quadric", {"type": "quadric", "matrix": [[1, 0, 0, 0], [0, 1, 0, 0],
+                                 [0, 0, 1, 0], [0, 0, 0, -1]]}, 0.01, None, False),
+        ("ellipsoid radii 1, 0.8, 0.6", {"type": "ellipsoid", "radii": [1, 0.8, 0.6]}, 0.0025, None, False),
+        ("union of two spheres", {"type": "union", "children": two}, 0.0025, None, True),
+        ("union of two spheres, bound", {"type": "union", "children": two}, 0.0025, "bound", True),
+        ("blend of two spheres, p = 20", {"type": "blend", "op": "union", "p": 20, "children": two},
+         0.0025, None, False),
+        ("union of 1000 spheres", {"type": "union", "children": many}, 0.004, None, True),
+        ("union of 1000 spheres, bound", {"type": "union", "children": many}, 0.004, "bound", True),
+    ]
+    rows = []
+    for i, (name, shape, dx, mode, route) in enumerate(scenes):
+        scene = {"voxel_size": dx * k, "shape": shape}
+        if mode:
+            scene["distance"] = mode
+        path = os.path.join(tmp, f"distances_{i}.json")
+        with open(path, "w") as f:
+            json.dump(scene, f)
+        rows.append((name, path, dx * k, route))
+
+    def compute(path):
+        res = subprocess.run([IVDB, "rasterize", path, "-o", os.path.join(tmp, "d.vdb")],
+                             check=True, capture_output=True, text=True).stdout
+        words = res.split()
+        active = int(words[1])
+        seconds = float(words[words.index("compute") + 1])
+        peak = res.split("peak memory ")[1].split(",")[0]
+        grid = res.split("grid ")[1].split(",")[0]
+        return active, seconds, peak, grid
+
+    def openvdb(path, dx):
+        res = subprocess.run([IVDB, "bench-run", path, "--method", "openvdb", "--voxel-size", repr(dx),
+                              "--reps", "3"], check=True, capture_output=True, text=True).stdout
+        return float(res.split()[0])
+
+    times = {name: [] for name, *_ in rows}
+    info = {}
+    for _ in range(reps):
+        for name, path, dx, _ in rows:
+            active, seconds, peak, grid = compute(path)
+            times[name].append(seconds)
+            info[name] = (active, peak, grid)
+    base = statistics.median(times[rows[0][0]]) / info[rows[0][0]][0]
+    print("| scene | active voxels | compute | per voxel vs the exact sphere | peak memory (grid) "
+          "| OpenVDB's route |")
+    print("|---|---|---|---|---|---|")
+    for name, path, dx, route in rows:
+        t = statistics.median(times[name])
+        active, peak, grid = info[name]
+        ovdb = f"{openvdb(path, dx):.3f} s" if route else "-"
+        print(f"| {name} | {active / 1e6:.2f} M | {t:.3f} s | {t / active / base:.1f}x | {peak} ({grid}) "
+              f"| {ovdb} |")
+    print()
 
 
 def gbench_medians_full(pattern, reps):

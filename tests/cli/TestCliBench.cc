@@ -84,21 +84,23 @@ TEST_F(TestCliBench, DefaultScenesCsvPlotAndTable)
     const auto r = runIvdb(mDir, {"bench", "--resolutions", "24,40", "--reps", "1", "--out", "b"});
     ASSERT_EQ(r.exitCode, 0) << r.err;
     const auto rows = readCsv(mDir / "b" / "bench.csv");
-    // Three scenes, two resolutions, three methods each (all are unions of spheres).
-    ASSERT_EQ(rows.size(), 18u);
+    // Five scenes (the sphere, and two unions in both distance modes), two resolutions, three
+    // methods each (all are unions of spheres).
+    ASSERT_EQ(rows.size(), 30u);
     std::map<std::string, const CsvRow*> byKey;
     for (const auto& row : rows) {
         EXPECT_EQ(row.at("status"), "ok") << row.at("scene") << " " << row.at("method");
         byKey[row.at("scene") + "/" + row.at("method") + "/" + row.at("resolution")] = &row;
         EXPECT_GT(std::stod(row.at("time_s")), 0.0);
         EXPECT_LE(std::stod(row.at("time_min_s")), std::stod(row.at("time_s")));
-        if (row.at("scene") != "spheres_1000" || row.at("method") != "openvdb") { // see below
+        if (row.at("scene").rfind("spheres_1000", 0) != 0 || row.at("method") != "openvdb") { // see below
             EXPECT_GT(std::stoull(row.at("active_voxels")), 0u);
         }
         EXPECT_GT(std::stoull(row.at("file_bytes")), 0u);
         EXPECT_GT(std::stoull(row.at("peak_memory_bytes")), std::stoull(row.at("work_memory_bytes")));
     }
-    for (const std::string scene : {"sphere", "two_spheres", "spheres_1000"}) {
+    for (const std::string scene : {"sphere", "two_spheres", "spheres_1000", "two_spheres_exact",
+                                    "spheres_1000_exact"}) {
         for (const std::string res : {"24", "40"}) {
             const CsvRow* s = byKey.at(scene + "/sparse/" + res);
             const CsvRow* d = byKey.at(scene + "/dense/" + res);
@@ -111,7 +113,7 @@ TEST_F(TestCliBench, DefaultScenesCsvPlotAndTable)
             // voxels whose distance rounds differently at the band's edge. (It drops spheres
             // under 1.5 voxels in radius, as many of the 1000 are at these sizes: not compared.)
             const double a = std::stod(s->at("active_voxels")), b = std::stod(o->at("active_voxels"));
-            if (scene != "spheres_1000") EXPECT_NEAR(a, b, 0.01 * a) << scene << " " << res;
+            if (scene == "sphere" || scene == "two_spheres") EXPECT_NEAR(a, b, 0.01 * a) << scene << " " << res;
         }
     }
     // Voxels across the shape: the sphere (2 units across) at 40 voxels has voxel size 0.05.
@@ -122,7 +124,8 @@ TEST_F(TestCliBench, DefaultScenesCsvPlotAndTable)
     EXPECT_EQ(png.substr(1, 3), "PNG");
     EXPECT_NE(r.out.find("| sphere | 40 |"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("sphere sparse: time slope"), std::string::npos) << r.out;
-    for (const char* s : {"sphere", "two_spheres", "spheres_1000"}) {
+    for (const char* s : {"sphere", "two_spheres", "spheres_1000", "two_spheres_exact",
+                          "spheres_1000_exact"}) {
         EXPECT_TRUE(fs::exists(mDir / "b" / "scenes" / (std::string(s) + ".json"))) << s;
     }
     // No temporary files left behind.

@@ -128,7 +128,8 @@ void addBench(CLI::App& app, Action& action)
         "scenes) over a sweep of resolutions: DIR/bench.csv, DIR/bench.png and a table");
     cmd.add("--scene", a->job.scenes,
             "Scene file (repeat for more); default: a sphere, a two-sphere union and 1000 random "
-            "spheres in a union");
+            "spheres in a union, each union with true distances (NAME_exact) and as min of the "
+            "distances (\"distance\": \"bound\")");
     cmd.add("--resolutions", a->job.resolutions,
             "Voxels across the shape's largest side, comma-separated; default "
             "64,100,160,256,400,640,800 (32,64,128 with --quick)", &param::kResolutions)

@@ -318,7 +318,7 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
         // Outside every term, the nearest term's distance is the distance to the union; inside,
         // so is the deciding term's as long as no other term comes within it (its foot point
         // then lies outside the others: they are 1-Lipschitz). Also beyond the range asked for.
-        if (!allOk || u >= 0.0 || second >= -u || -u >= query.far) {
+        if (!allOk || leadKeepsDistance(u, second, 0.0) || -u >= query.far) {
             Vec3d q = p;
             if (query.feet && !footOf(first, i, q)) out.ok[i] = false;
             out.x[i] = q[0];
@@ -334,6 +334,12 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
         for (std::size_t c = 0; c < nc; ++c) {
             if (termSign(c) * distanceOf(c, i) < query.far) nearTerms.push_back(c);
         }
+        // Nearest surfaces first: a crease (or corner) point of terms a and b is |p - q| >=
+        // |d_a| and >= |d_b| away (the distance to each surface is at most that), so once a
+        // term is as far as the best candidate so far, no later pair or corner can beat it.
+        std::sort(nearTerms.begin(), nearTerms.end(), [&](std::size_t l, std::size_t r) {
+            return std::abs(distanceOf(l, i)) < std::abs(distanceOf(r, i));
+        });
         double best = std::numeric_limits<double>::max();
         Vec3d foot = p;
         bool complete = true; // every candidate was found
@@ -346,14 +352,10 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
             if (!footOf(c, i, q)) complete = false;
             else if (outsideOthers(q, {c})) offer(q);
         }
-        // A crease (or corner) point q of terms a and b is |p - q| >= |d_a| and >= |d_b| away
-        // (the distance to each surface is at most that): only pairs nearer than the best so
-        // far can offer a better one.
-        auto within = [&](std::size_t c) { return std::abs(distanceOf(c, i)) < best; };
-        for (std::size_t a = 0; a < nearTerms.size(); ++a) {
-            for (std::size_t b = a + 1; b < nearTerms.size(); ++b) {
+        auto beyond = [&](std::size_t c) { return std::abs(distanceOf(c, i)) >= best; };
+        for (std::size_t a = 0; a < nearTerms.size() && !beyond(nearTerms[a]); ++a) {
+            for (std::size_t b = a + 1; b < nearTerms.size() && !beyond(nearTerms[b]); ++b) {
                 const std::size_t ca = nearTerms[a], cb = nearTerms[b];
-                if (!within(ca) || !within(cb)) continue;
                 Vec3d start, q;
                 footOf(ca, i, start);
                 if (!creasePoint(*mChildren[ca], *mChildren[cb], p, start, query.tolerance, q)) {
@@ -362,9 +364,8 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
                 }
                 if (outsideOthers(q, {ca, cb})) offer(q);
                 // Where a third surface cuts this crease near q: a corner.
-                for (std::size_t k = b + 1; k < nearTerms.size(); ++k) {
+                for (std::size_t k = b + 1; k < nearTerms.size() && !beyond(nearTerms[k]); ++k) {
                     const std::size_t cc = nearTerms[k];
-                    if (!within(cc)) continue;
                     Vec3d corner;
                     if (cornerPoint({mChildren[ca].get(), mChildren[cb].get(), mChildren[cc].get()},
                                     q, query.tolerance, corner) &&

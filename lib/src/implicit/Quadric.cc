@@ -187,46 +187,51 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         const double t0 = d0 * q0 + b0, t1 = d1 * q1 + b1, t2 = d2 * q2 + b2;
         const double g = q0 * (d0 * q0 + 2.0 * b0) + q1 * (d1 * q1 + 2.0 * b1) +
                          q2 * (d2 * q2 + 2.0 * b2) + c;
-        const double dg = -4.0 * (t0 * t0 * i0 + t1 * t1 * i1 + t2 * t2 * i2);
-        // Newton's step, kept inside (lo, hi), where every 1 + 2 mu d_i > 0: halfway to the
-        // edge instead of beyond it.
-        double next = u - (dg < 0.0 ? g / dg : 0.0);
-        next = next <= lo ? 0.5 * (u + lo) : next;
-        next = next >= hi ? 0.5 * (u + hi) : next;
+        // dg < 0 where every 1 + 2 mu d_i > 0 (the starting point and every step stay there).
+        const double dg = std::min(-4.0 * (t0 * t0 * i0 + t1 * t1 * i1 + t2 * t2 * i2), -1e-300);
+        // Newton's step, kept inside (lo, hi): at most halfway to either edge (selects, no
+        // branches, so that the loop over a batch vectorizes).
+        const double next = std::min(std::max(u - g / dg, 0.5 * (u + lo)), 0.5 * (u + hi));
         const double s = u - next;
         u = next;
         return s;
     };
+    // The points in the eigenframe, their gradients and first-order estimates (a loop that
+    // vectorizes), then the ones near enough to need the foot point, compacted.
+    double e[kMaxBatch], gl[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        p0[i] = mFrame[0][0] * x[i] + mFrame[1][0] * y[i] + mFrame[2][0] * z[i];
+        p1[i] = mFrame[0][1] * x[i] + mFrame[1][1] * y[i] + mFrame[2][1] * z[i];
+        p2[i] = mFrame[0][2] * x[i] + mFrame[1][2] * y[i] + mFrame[2][2] * z[i];
+        const double g0 = 2.0 * (d0 * p0[i] + b0), g1 = 2.0 * (d1 * p1[i] + b1),
+                     g2 = 2.0 * (d2 * p2[i] + b2);
+        gl[i] = std::sqrt(g0 * g0 + g1 * g1 + g2 * g2);
+        e[i] = values[i] / gl[i];
+    }
     std::size_t idx[kMaxBatch], m = 0;
     for (std::size_t i = 0; i < n; ++i) {
         const double v = values[i];
-        const double pp0 = mFrame[0][0] * x[i] + mFrame[1][0] * y[i] + mFrame[2][0] * z[i];
-        const double pp1 = mFrame[0][1] * x[i] + mFrame[1][1] * y[i] + mFrame[2][1] * z[i];
-        const double pp2 = mFrame[0][2] * x[i] + mFrame[1][2] * y[i] + mFrame[2][2] * z[i];
-        const double g0 = 2.0 * (d0 * pp0 + b0), g1 = 2.0 * (d1 * pp1 + b1), g2 = 2.0 * (d2 * pp2 + b2);
-        const double gg = g0 * g0 + g1 * g1 + g2 * g2;
         out.x[i] = x[i];
         out.y[i] = y[i];
         out.z[i] = z[i];
         out.ok[i] = false;
-        if (!(gg > 0.0) || !std::isfinite(gg)) {
+        if (!(gl[i] > 0.0) || !std::isfinite(gl[i])) {
             out.distance[i] = v > 0.0 ? query.far : -query.far;
             continue;
         }
-        const double gl = std::sqrt(gg), e = v / gl;
-        out.distance[i] = e;
+        out.distance[i] = e[i];
         // f(p + h) = f(p) + grad f . h + h^T A h: no surface within far of p if |f| exceeds
         // what the two terms can take away (then |e| > far too).
-        if (v == 0.0 || std::abs(v) > gl * query.far + normA * query.far * query.far) {
+        if (v == 0.0 || std::abs(v) > gl[i] * query.far + normA * query.far * query.far) {
             out.ok[i] = true;
             continue;
         }
         idx[m] = i;
-        p0[m] = pp0;
-        p1[m] = pp1;
-        p2[m] = pp2;
+        p0[m] = p0[i];
+        p1[m] = p1[i];
+        p2[m] = p2[i];
         // The first-order multiplier, moved inside (lo, hi) if it is not.
-        double u = v / gg;
+        double u = v / (gl[i] * gl[i]);
         u = u <= lo ? 0.5 * lo : u;
         u = u >= hi ? 0.5 * hi : u;
         mu[m] = u;
@@ -236,38 +241,48 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         for (std::size_t k = 0; k < m; ++k) step[k] = newtonStep(p0[k], p1[k], p2[k], mu[k]);
     }
     for (std::size_t k = 0; k < m; ++k) {
-        const std::size_t i = idx[k];
-        // Further steps where the two were not enough (a surface curving within the distance).
-        for (int it = 0; it < 12 && std::abs(step[k]) > 1e-12 * std::abs(mu[k]); ++it) {
+        // Further steps where the two were not enough (a surface curving within the distance):
+        // the error after a step of relative size s is about s^2, so a last step below 1e-6
+        // leaves mu right to 1e-12 (and where neighbours stop after different numbers of steps
+        // their distances differ by that much: far below what curvature can see).
+        for (int it = 0; it < 12 && std::abs(step[k]) > 1e-6 * std::abs(mu[k]); ++it) {
             step[k] = newtonStep(p0[k], p1[k], p2[k], mu[k]);
         }
+    }
+    // The foot points (in the eigenframe), the distances and the certificates: a vectorized loop.
+    double q0[kMaxBatch], q1[kMaxBatch], q2[kMaxBatch], dist[kMaxBatch], good[kMaxBatch];
+    // On an ellipsoid (A positive definite) g is strictly decreasing where every 1 + 2 mu d_i >
+    // 0, and its one root there is the closest point: certified. Other quadrics also check the
+    // distance against the first-order estimate, as the smooth iteration does.
+    const double agreement = d0 > 0.0 && d1 > 0.0 && d2 > 0.0 ? inf : 0.25;
+    for (std::size_t k = 0; k < m; ++k) {
         const double u = mu[k];
-        const double den[3] = {1.0 + 2.0 * u * d0, 1.0 + 2.0 * u * d1, 1.0 + 2.0 * u * d2};
-        if (!(den[0] > 0.0 && den[1] > 0.0 && den[2] > 0.0)) continue;
-        const double qp[3] = {(p0[k] - 2.0 * u * b0) / den[0], (p1[k] - 2.0 * u * b1) / den[1],
-                              (p2[k] - 2.0 * u * b2) / den[2]};
-        const double gq[3] = {2.0 * (d0 * qp[0] + b0), 2.0 * (d1 * qp[1] + b1),
-                              2.0 * (d2 * qp[2] + b2)};
-        const double gl = std::sqrt(gq[0] * gq[0] + gq[1] * gq[1] + gq[2] * gq[2]);
-        const double g = qp[0] * (d0 * qp[0] + 2.0 * b0) + qp[1] * (d1 * qp[1] + 2.0 * b1) +
-                         qp[2] * (d2 * qp[2] + 2.0 * b2) + c;
-        const Vec3d q(mFrame[0][0] * qp[0] + mFrame[0][1] * qp[1] + mFrame[0][2] * qp[2],
-                      mFrame[1][0] * qp[0] + mFrame[1][1] * qp[1] + mFrame[1][2] * qp[2],
-                      mFrame[2][0] * qp[0] + mFrame[2][1] * qp[1] + mFrame[2][2] * qp[2]);
-        const double d = std::copysign((Vec3d(x[i], y[i], z[i]) - q).length(), values[i]);
-        const double e = out.distance[i];
-        // On an ellipsoid (A positive definite) g is strictly decreasing where every 1 + 2 mu d_i
-        // > 0, and its one root there is the closest point: certified. Other quadrics also
-        // check the distance against the first-order estimate, as the smooth iteration does.
-        const bool ellipsoid = d0 > 0.0 && d1 > 0.0 && d2 > 0.0;
-        if (gl > 0.0 && std::abs(g) / gl <= query.tolerance &&
-            (ellipsoid || std::abs(d - e) <= 0.25 * std::abs(e) + query.tolerance)) {
-            out.distance[i] = d;
-            out.x[i] = q[0];
-            out.y[i] = q[1];
-            out.z[i] = q[2];
-            out.ok[i] = true;
-        }
+        const double e0 = 1.0 + 2.0 * u * d0, e1 = 1.0 + 2.0 * u * d1, e2 = 1.0 + 2.0 * u * d2;
+        q0[k] = (p0[k] - 2.0 * u * b0) / e0;
+        q1[k] = (p1[k] - 2.0 * u * b1) / e1;
+        q2[k] = (p2[k] - 2.0 * u * b2) / e2;
+        const double g0 = 2.0 * (d0 * q0[k] + b0), g1 = 2.0 * (d1 * q1[k] + b1),
+                     g2 = 2.0 * (d2 * q2[k] + b2);
+        const double glq = std::sqrt(g0 * g0 + g1 * g1 + g2 * g2);
+        const double g = q0[k] * (d0 * q0[k] + 2.0 * b0) + q1[k] * (d1 * q1[k] + 2.0 * b1) +
+                         q2[k] * (d2 * q2[k] + 2.0 * b2) + c;
+        const double r0 = p0[k] - q0[k], r1 = p1[k] - q1[k], r2 = p2[k] - q2[k];
+        dist[k] = std::sqrt(r0 * r0 + r1 * r1 + r2 * r2);
+        const double est = std::abs(e[idx[k]]);
+        const bool ok = std::min({e0, e1, e2}) > 0.0 && glq > 0.0 &&
+                        std::abs(g) <= query.tolerance * glq &&
+                        std::abs(dist[k] - est) <= agreement * est + query.tolerance;
+        good[k] = ok ? 1.0 : 0.0;
+    }
+    for (std::size_t k = 0; k < m; ++k) {
+        if (good[k] == 0.0) continue;
+        const std::size_t i = idx[k];
+        out.distance[i] = std::copysign(dist[k], values[i]);
+        out.ok[i] = true;
+        if (!query.feet) continue;
+        out.x[i] = mFrame[0][0] * q0[k] + mFrame[0][1] * q1[k] + mFrame[0][2] * q2[k];
+        out.y[i] = mFrame[1][0] * q0[k] + mFrame[1][1] * q1[k] + mFrame[1][2] * q2[k];
+        out.z[i] = mFrame[2][0] * q0[k] + mFrame[2][1] * q1[k] + mFrame[2][2] * q2[k];
     }
 }
 #if defined(__GNUC__) && !defined(__clang__)

@@ -142,28 +142,32 @@ std::string writeScene(const fs::path& dir, const std::string& name, const std::
 }
 
 // The default scenes: a sphere, the two-sphere union and 1000 random spheres in a union (fixed
-// seed, so every run measures the same scene). The unions store min of the distances
-// ("distance": "bound"), the values OpenVDB's csgUnion gives the openvdb route.
+// seed, so every run measures the same scene), each union twice: with true distances (the
+// default distance mode: "_exact") and as min of the distances ("distance": "bound"), the
+// values OpenVDB's csgUnion gives its route.
 std::vector<std::pair<std::string, std::string>> defaultScenes(const fs::path& dir)
 {
     std::vector<std::pair<std::string, std::string>> out;
     out.emplace_back("sphere", writeScene(dir, "sphere",
         R"({"shape": {"type": "sphere", "center": [0, 0, 0], "radius": 1}})"));
-    out.emplace_back("two_spheres", writeScene(dir, "two_spheres",
-        R"({"distance": "bound", "shape": {"type": "union", "children": [)"
+    const std::string two = R"("shape": {"type": "union", "children": [)"
         R"({"type": "sphere", "center": [-0.35, 0, 0], "radius": 0.6}, )"
-        R"({"type": "sphere", "center": [0.35, 0, 0], "radius": 0.6}]}})"));
+        R"({"type": "sphere", "center": [0.35, 0, 0], "radius": 0.6}]}})";
     std::mt19937 rng(20261124);
     std::uniform_real_distribution<double> pos(-0.9, 0.9), rad(0.04, 0.1);
     std::ostringstream os;
-    os << R"({"distance": "bound", "shape": {"type": "union", "children": [)";
+    os << R"("shape": {"type": "union", "children": [)";
     for (int i = 0; i < 1000; ++i) {
         const double x = pos(rng), y = pos(rng), z = pos(rng), r = rad(rng);
         os << (i ? ", " : "") << R"({"type": "sphere", "center": [)" << x << ", " << y << ", " << z
            << R"(], "radius": )" << r << "}";
     }
     os << "]}}";
-    out.emplace_back("spheres_1000", writeScene(dir, "spheres_1000", os.str()));
+    for (const auto& [name, shape] : {std::pair<std::string, std::string>{"two_spheres", two},
+                                      {"spheres_1000", os.str()}}) {
+        out.emplace_back(name, writeScene(dir, name, R"({"distance": "bound", )" + shape));
+        out.emplace_back(name + "_exact", writeScene(dir, name + "_exact", "{" + shape));
+    }
     return out;
 }
 

@@ -523,7 +523,7 @@ BlendedValues blendValues(CsgOp op, const BlendPlan& plan, const BlendSettings& 
                     if (v < first) second = first, first = v;
                     else if (v < second) second = v;
                 }
-                if (second < 1e30 && second - first < lead + 2.0 * std::max(0.0, -first)) {
+                if (second < 1e30 && !implicit::leadKeepsDistance(first, second, lead)) {
                     mark.setValueOn(m); // two terms within reach, the second close enough
                 }
             }

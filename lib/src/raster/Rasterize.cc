@@ -74,6 +74,7 @@ struct Context
     int reachSteps = 0;     // non-exact: voxel steps from the interface a band voxel can be
     double reach = 0.0;     // world distance a box is dilated by before the interval test
     detail::DistanceSettings distances; // non-exact: how true distances are found
+    bool boundedByDistance = false; // non-exact: |f| <= the distance (a CSG of exact SDFs)
     CoordBBox region;       // index box that holds every voxel of the result
     openvdb::util::NullInterrupter* interrupter = nullptr;
     std::uint64_t memoryLimit = 0;
@@ -143,44 +144,57 @@ void leafPoints(const Coord& origin, double dx, double* x, double* y, double* z)
     }
 }
 
-/// True distances in place of the values @a v of the leaf at @a origin, for a shape that is not
-/// an exact SDF. Only voxels that can be in the band are solved for: the leaf's 2^3 groups of
-/// voxels whose box, grown by the band, holds a sign change of the shape's interval; the others
-/// keep their value, whose sign is all the band rule uses beyond the band (|value| is raised
-/// to the band).
-void trueDistancesOfLeaf(const Context& ctx, const Implicit& f, const Coord& origin,
-                         const double* x, const double* y, const double* z, double* v,
-                         Counts* counts)
+/// The values of a leaf for a shape that is not an exact SDF: true distances for the voxels
+/// that can be in the band, +/- the band (by sign) for the others. Which voxels can be: for a
+/// CSG of exact distances (|f| <= the distance), those with |f| < band; otherwise those in the
+/// leaf's 2^3 groups of voxels whose box, grown by the band, holds a sign change of the shape's
+/// interval (then only those voxels are evaluated at all).
+void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, const double* x,
+                   const double* y, const double* z, double* v, Counts* counts)
 {
     alignas(64) double sx[512], sy[512], sz[512], sv[512], d[512];
     Coord ijk[512];
     int index[512];
     int m = 0;
-    const double grow = ctx.band + 1e-9 * ctx.dx;
-    for (int a = 0; a < 8; a += 2)
-    for (int b = 0; b < 8; b += 2)
-    for (int c = 0; c < 8; c += 2) {
-        const Coord lo = origin.offsetBy(a, b, c);
-        const BBoxd w = ctx.worldBox(CoordBBox(lo, lo.offsetBy(1, 1, 1)));
-        const Interval iv = f.interval(BBoxd(w.min() - Vec3d(grow), w.max() + Vec3d(grow)));
-        const bool beyond = iv.lo > 0.0 || iv.hi < 0.0;
-        for (int i = a; i < a + 2; ++i)
-        for (int j = b; j < b + 2; ++j)
-        for (int k = c; k < c + 2; ++k) {
-            const int n = (i << 6) | (j << 3) | k;
-            if (beyond) {
-                // No surface within the band of these voxels.
-                v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
-                continue;
+    auto take = [&](int n, int i, int j, int k) {
+        sx[m] = x[n];
+        sy[m] = y[n];
+        sz[m] = z[n];
+        ijk[m] = origin.offsetBy(i, j, k);
+        index[m++] = n;
+    };
+    bool inside = false;
+    if (ctx.boundedByDistance) {
+        f.values(x, y, z, v, 512);
+        for (int i = 0, n = 0; i < 8; ++i)
+            for (int j = 0; j < 8; ++j)
+                for (int k = 0; k < 8; ++k, ++n) {
+                    inside = inside || v[n] < 0.0;
+                    if (std::abs(v[n]) < ctx.band) take(n, i, j, k);
+                    else v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
+                }
+        for (int k = 0; k < m; ++k) sv[k] = v[index[k]];
+    } else {
+        const double grow = ctx.band + 1e-9 * ctx.dx;
+        for (int a = 0; a < 8; a += 2)
+        for (int b = 0; b < 8; b += 2)
+        for (int c = 0; c < 8; c += 2) {
+            const Coord lo = origin.offsetBy(a, b, c);
+            const BBoxd w = ctx.worldBox(CoordBBox(lo, lo.offsetBy(1, 1, 1)));
+            const Interval iv = f.interval(BBoxd(w.min() - Vec3d(grow), w.max() + Vec3d(grow)));
+            for (int i = a; i < a + 2; ++i)
+            for (int j = b; j < b + 2; ++j)
+            for (int k = c; k < c + 2; ++k) {
+                const int n = (i << 6) | (j << 3) | k;
+                if (iv.lo > 0.0) v[n] = ctx.band; // no surface within the band
+                else if (iv.hi < 0.0) v[n] = -ctx.band, inside = true;
+                else take(n, i, j, k);
             }
-            sx[m] = x[n];
-            sy[m] = y[n];
-            sz[m] = z[n];
-            sv[m] = v[n];
-            ijk[m] = origin.offsetBy(i, j, k);
-            index[m++] = n;
         }
+        f.values(sx, sy, sz, sv, std::size_t(m));
+        for (int k = 0; k < m; ++k) inside = inside || sv[k] < 0.0;
     }
+    if (counts && inside && !counts->anyInside) counts->anyInside = true;
     if (m == 0) return;
     detail::DistanceCounts dc;
     detail::trueDistances(f, ijk, sx, sy, sz, sv, std::size_t(m), ctx.distances, d, dc);
@@ -195,13 +209,8 @@ LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, boo
 {
     alignas(64) double x[512], y[512], z[512], v[512];
     leafPoints(origin, ctx.dx, x, y, z);
-    f.values(x, y, z, v, 512);
-    if (!ctx.exact) {
-        if (counts && !counts->anyInside && std::any_of(v, v + 512, [](double a) { return a < 0.0; })) {
-            counts->anyInside = true;
-        }
-        trueDistancesOfLeaf(ctx, f, origin, x, y, z, v, counts);
-    }
+    if (ctx.exact) f.values(x, y, z, v, 512);
+    else leafDistances(ctx, f, origin, x, y, z, v, counts);
     const float bg = static_cast<float>(ctx.band);
     auto leaf = std::make_unique<LeafT>(origin, bg);
     float* buf = leaf->buffer().data();
@@ -774,6 +783,7 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         }
         ctx.exact = true; // the stored value is f itself
     }
+    ctx.boundedByDistance = !ctx.exact && isCsgOfDistances(*ctx.shape);
     ctx.interrupter = s.interrupter;
     ctx.memoryLimit = s.memoryLimit;
     if (ctx.exact) {

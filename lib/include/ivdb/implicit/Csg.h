@@ -44,6 +44,17 @@ private:
     std::vector<Ptr> mChildren;
 };
 
+/// @brief The lead rule of unions of distances (docs/method.md#true-distances): with the two
+/// smallest terms @a first <= @a second of a union of exact (or 1-Lipschitz lower-bound)
+/// distances at a point, the deciding term's value is the distance to the union's surface
+/// unless a surface within @a reach of the crease can be nearer: true when the lead
+/// second - first is at least reach + 2 max(0, -first). Sharp CSG uses reach 0; the grid blend
+/// its blend's reach (the blended surface leaves the sharp one only there).
+inline bool leadKeepsDistance(double first, double second, double reach)
+{
+    return second - first >= reach + 2.0 * (first < 0.0 ? -first : 0.0);
+}
+
 /// @brief Rigid motion and scale of a child: p = R S q + t, with R = Rz Ry Rx.
 /// @details The value is min(scale) * child(q): an exact SDF stays exact under uniform scale,
 /// and a non-uniform scale keeps the sign and the Lipschitz bound (then it is re-distanced).
