@@ -183,6 +183,57 @@ TEST_F(TestCli, OptionOverrides)
     EXPECT_EQ(q.out, "");
 }
 
+TEST_F(TestCli, OutputOptions)
+{
+    // What OpenVDB's own reader gets from each kind of file the writer makes.
+    const auto load = [&](const std::string& name) {
+        openvdb::io::File file(path(name));
+        file.open();
+        auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("surface"));
+        file.close();
+        return grid;
+    };
+    const std::string scene = data("sphere.json");
+    rasterize(scene, "blosc.vdb", {"--voxel-size", "0.02"});
+    rasterize(scene, "zip.vdb", {"--voxel-size", "0.02", "--compression", "zip"});
+    rasterize(scene, "none.vdb", {"--voxel-size", "0.02", "--compression", "none"});
+    rasterize(scene, "half.vdb", {"--voxel-size", "0.02", "--half"});
+    const auto blosc = load("blosc.vdb");
+    ASSERT_TRUE(blosc);
+    EXPECT_FALSE(blosc->saveFloatAsHalf());
+    for (const char* name: {"zip.vdb", "none.vdb"}) {
+        const auto grid = load(name);
+        ASSERT_TRUE(grid) << name;
+        EXPECT_EQ(grid->activeVoxelCount(), blosc->activeVoxelCount()) << name;
+        std::size_t differ = 0;
+        for (auto it = blosc->cbeginValueOn(); it; ++it) {
+            differ += grid->tree().getValue(it.getCoord()) != *it;
+        }
+        EXPECT_EQ(differ, 0u) << name;
+    }
+    // Blosc stores less than the raw values; zlib barely compresses float level sets (OpenVDB
+    // stores a buffer raw, with an 8-byte size, when zlib does not make it smaller)
+    const auto bloscSize = fs::file_size(path("blosc.vdb")), noneSize = fs::file_size(path("none.vdb"));
+    EXPECT_LT(bloscSize, 0.97 * noneSize);
+    EXPECT_LT(fs::file_size(path("zip.vdb")), 1.01 * noneSize);
+
+    // half floats: flagged as such, about half the uncompressed payload, within half precision
+    const auto half = load("half.vdb");
+    ASSERT_TRUE(half);
+    EXPECT_TRUE(half->saveFloatAsHalf());
+    EXPECT_EQ(half->activeVoxelCount(), blosc->activeVoxelCount());
+    double worst = 0;
+    for (auto it = blosc->cbeginValueOn(); it; ++it) {
+        const double a = *it, b = half->tree().getValue(it.getCoord());
+        worst = std::max(worst, std::abs(a - b) / std::max(std::abs(a), 6.2e-5));
+    }
+    EXPECT_LE(worst, std::ldexp(1.0, -11));
+    EXPECT_LT(fs::file_size(path("half.vdb")), bloscSize);
+
+    expectFails({"rasterize", scene, "--compression", "lz4"}, "out.vdb",
+                {"--compression", "lz4", "blosc", "zip", "none"}, "--compression lz4");
+}
+
 TEST_F(TestCli, BadScenes)
 {
     writeText("neg.json", R"({"voxel_size": 0.01, "shape": {"type": "union", "children": [

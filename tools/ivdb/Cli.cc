@@ -3,6 +3,7 @@
 
 #include <ivdb/Version.h>
 #include <ivdb/io/AtomicFile.h>
+#include <ivdb/io/VdbFile.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/openvdb.h>
@@ -138,6 +139,19 @@ void addFogFlag(Command& cmd, bool& fog)
     cmd.flag("--fog", fog,
              "Also write a 'density' fog volume (0 outside, a ramp across the inside of the "
              "band, 1 deeper inside) so Blender renders the file as a volume");
+}
+
+void addWriteOptions(Command& cmd, std::string& compression, bool& half)
+{
+    cmd.add("--compression", compression,
+            "How values are compressed on disk: blosc (fast, OpenVDB's default), zip (smaller; "
+            "OpenVDB never zips level sets and fog volumes) or none; always with only active "
+            "values stored")
+        ->check(CLI::IsMember(io::compressionNames()))
+        ->capture_default_str();
+    cmd.flag("--half", half,
+             "Store float values as 16-bit halves (smaller files, 11 significant bits; what "
+             "Houdini and vdb_tool offer)");
 }
 
 void addQuietFlag(Command& cmd, bool& quiet)

@@ -104,6 +104,10 @@ void printNotes(const std::vector<std::string>& notes, const std::vector<std::st
 /// @brief The --fog flag of the commands that write a level set.
 void addFogFlag(Command& cmd, bool& fog);
 
+/// @brief --compression and --half of the commands that write a .vdb, bound to @a compression
+/// (a word of io::compressionNames()) and @a half.
+void addWriteOptions(Command& cmd, std::string& compression, bool& half);
+
 /// @brief The -q flag of the commands that print a summary line.
 void addQuietFlag(Command& cmd, bool& quiet);
 

@@ -14,6 +14,7 @@ namespace {
 struct CombineArgs
 {
     jobs::CombineOptions job;
+    std::string compression = "blosc";
     std::string op;
     double p = 0.0;
     bool quiet = false;
@@ -21,6 +22,7 @@ struct CombineArgs
 
 int runCombine(CombineArgs& a, bool blend)
 {
+    a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
     a.job.op = *implicit::csgOpFromString(a.op);
     if (blend) a.job.p = a.p;
     std::optional<Progress> progress;
@@ -53,6 +55,7 @@ std::shared_ptr<CombineArgs> addCombineOptions(Command& cmd)
     cmd.add("-o,--output", a->job.output, "Output .vdb file (written atomically)")->required();
     cmd.add("--grid", a->job.grid, "Grid name in every input (default: each file's first level set)",
             &param::kGrid);
+    addWriteOptions(cmd, a->compression, a->job.write.half);
     addFogFlag(cmd, a->job.fog);
     addQuietFlag(cmd, a->quiet);
     return a;

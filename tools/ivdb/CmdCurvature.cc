@@ -13,12 +13,14 @@ namespace {
 struct CurvatureArgs
 {
     jobs::CurvatureOptions job;
+    std::string compression = "blosc";
     std::string method = "mean";
     bool quiet = false;
 };
 
 int runCurvature(CurvatureArgs& a)
 {
+    a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
     a.job.method = enumOf<jobs::CurvatureMethod>(a.method, jobs::curvatureMethodNames());
     const jobs::CurvatureResult r = jobs::curvature(a.job);
     if (!a.quiet) {
@@ -49,6 +51,7 @@ void addCurvature(CLI::App& app, Action& action)
         ->capture_default_str();
     cmd.add("--grid", a->job.grid, "Input grid name (default: the first level set)", &param::kGrid);
     cmd.flag("--with-input", a->job.withInput, "Also copy the input grid into the output file");
+    addWriteOptions(cmd, a->compression, a->job.write.half);
     addQuietFlag(cmd, a->quiet);
     cmd.onRun(action, [a]() { return runCurvature(*a); });
 }

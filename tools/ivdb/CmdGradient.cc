@@ -13,11 +13,13 @@ namespace {
 struct GradientArgs
 {
     jobs::GradientOptions job;
+    std::string compression = "blosc";
     bool quiet = false;
 };
 
-int runGradient(const GradientArgs& a)
+int runGradient(GradientArgs& a)
 {
+    a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
     const jobs::GradientResult r = jobs::gradient(a.job);
     if (!a.quiet) {
         std::printf("%s: gradient of '%s', step %d, %llu active voxels, read %.3f s, compute "
@@ -46,6 +48,7 @@ void addGradient(CLI::App& app, Action& action)
     cmd.add("--grid", a->job.grid, "Input grid name (default: the first level set)", &param::kGrid);
     cmd.flag("--magnitude", a->job.magnitude, "Also write 'gradient_magnitude' (|gradient|)");
     cmd.flag("--with-input", a->job.withInput, "Also copy the input grid into the output file");
+    addWriteOptions(cmd, a->compression, a->job.write.half);
     addQuietFlag(cmd, a->quiet);
     cmd.onRun(action, [a]() { return runGradient(*a); });
 }

@@ -14,12 +14,14 @@ namespace {
 struct RasterizeArgs
 {
     jobs::RasterizeOptions job;
+    std::string compression = "blosc";
     std::string sampling = "sparse", distance;
     bool quiet = false;
 };
 
 int runRasterize(RasterizeArgs& a)
 {
+    a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
     a.job.sampling = a.sampling == "dense" ? raster::Sampling::Dense : raster::Sampling::Sparse;
     if (!a.distance.empty()) {
         a.job.distance = a.distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
@@ -73,6 +75,7 @@ void addRasterize(CLI::App& app, Action& action)
             "it, without re-distancing (overrides the scene's \"distance\", default exact)",
             &param::kDistance)
         ->check(CLI::IsMember({"exact", "bound"}));
+    addWriteOptions(cmd, a->compression, a->job.write.half);
     addFogFlag(cmd, a->job.fog);
     addQuietFlag(cmd, a->quiet);
     cmd.onRun(action, [a]() { return runRasterize(*a); });

@@ -29,27 +29,7 @@ namespace {
     OPENVDB_THROW(openvdb::IoError, path + ": " + what);
 }
 
-/// io::File writes through an unchecked ofstream; this writes the same seekable layout (with
-/// grid offsets for delayed loading) to a stream whose every error we check.
-class CheckedArchive: public openvdb::io::Archive
-{
-public:
-    void writeTo(std::ostream& os, const openvdb::GridCPtrVec& grids,
-                 const openvdb::MetaMap& meta) const
-    {
-        this->write(os, grids, /*seekable=*/true, meta);
-    }
-};
-
 } // namespace
-
-void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
-              const openvdb::MetaMap& fileMetadata)
-{
-    writeFileAtomically(path, [&](std::ostream& os) {
-        CheckedArchive().writeTo(os, grids, fileMetadata);
-    });
-}
 
 openvdb::GridPtrVec readVdb(const std::string& path)
 {
@@ -122,11 +102,12 @@ void stampGrid(openvdb::GridBase& grid, const std::string& source)
     grid.insertMeta("ivdb_source", openvdb::StringMetadata(source));
 }
 
-void writeVdbStamped(const std::string& path, const openvdb::GridCPtrVec& grids)
+void writeVdbStamped(const std::string& path, const openvdb::GridCPtrVec& grids,
+                     const WriteOptions& options)
 {
     openvdb::MetaMap fileMeta;
     fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    writeVdb(path, grids, fileMeta);
+    writeVdb(path, grids, fileMeta, options);
 }
 
 GridInfo describeGrid(const openvdb::GridBase& grid)

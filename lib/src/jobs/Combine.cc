@@ -47,7 +47,7 @@ CombineResult combine(const CombineOptions& opt)
                                    : std::string("csg ") + implicit::toString(opt.op);
     io::stampGrid(*result.surface, what + " " + detail::joined(opt.inputs));
     if (opt.fog) result.density = detail::fogWithStamps(*result.surface);
-    detail::writeGrids(opt.output, {result.surface, result.density});
+    detail::writeGrids(opt.output, {result.surface, result.density}, opt.write);
     result.totalSeconds = clock.total();
     return result;
 }

@@ -17,14 +17,15 @@ openvdb::FloatGrid::Ptr fogWithStamps(const openvdb::FloatGrid& surface)
     return density;
 }
 
-std::uint64_t writeGrids(const std::string& path, const std::vector<openvdb::GridBase::ConstPtr>& grids)
+std::uint64_t writeGrids(const std::string& path, const std::vector<openvdb::GridBase::ConstPtr>& grids,
+                         const io::WriteOptions& options)
 {
     if (path.empty()) return 0;
     openvdb::GridCPtrVec out;
     for (const auto& g : grids) {
         if (g) out.push_back(g);
     }
-    io::writeVdbStamped(path, out);
+    io::writeVdbStamped(path, out, options);
     std::error_code ec;
     const auto size = std::filesystem::file_size(path, ec);
     return ec ? 0 : std::uint64_t(size);

@@ -32,7 +32,7 @@ GradientResult gradient(const GradientOptions& opt)
         io::stampGrid(*result.magnitude, source);
     }
     detail::writeGrids(opt.output, {result.gradient, result.magnitude,
-                                    opt.withInput ? result.input : nullptr});
+                                    opt.withInput ? result.input : nullptr}, opt.write);
     result.totalSeconds = clock.total();
     return result;
 }
@@ -83,7 +83,7 @@ CurvatureResult curvature(const CurvatureOptions& opt)
         out.push_back(g);
     }
     if (opt.withInput) out.push_back(result.input);
-    detail::writeGrids(opt.output, out);
+    detail::writeGrids(opt.output, out, opt.write);
     result.totalSeconds = clock.total();
     return result;
 }

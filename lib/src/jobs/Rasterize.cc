@@ -92,7 +92,7 @@ RasterizeResult rasterize(const RasterizeOptions& opt)
     result.surface->insertMeta("ivdb_sampling", openvdb::StringMetadata(
         settings.sampling == raster::Sampling::Dense ? "dense" : "sparse"));
     if (opt.fog) result.density = detail::fogWithStamps(*result.surface);
-    result.fileBytes = detail::writeGrids(opt.output, {result.surface, result.density});
+    result.fileBytes = detail::writeGrids(opt.output, {result.surface, result.density}, opt.write);
     result.totalSeconds = clock.total();
     return result;
 }

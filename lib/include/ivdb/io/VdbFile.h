@@ -11,17 +11,57 @@
 
 namespace ivdb::io {
 
-/// @brief Write @a grids to @a path with OpenVDB's default compression, atomically
-/// (writeFileAtomically).
+/// @brief How voxel values are compressed on disk. Every choice also stores only the active
+/// values where the inactive ones are the background (OpenVDB's "active values" compression).
+enum class Compression {
+    Blosc, ///< Blosc (LZ4, level 9, byte shuffle): OpenVDB's default, fast
+    Zip,   ///< zlib: smaller, slower (OpenVDB leaves level sets and fog volumes unzipped)
+    None   ///< no codec
+};
+
+/// @brief "blosc", "zip", "none", in the order of the enum.
+const std::vector<std::string>& compressionNames();
+
+/// @brief OpenVDB's archive compression flags for @a c (io::COMPRESS_*).
+std::uint32_t compressionFlags(Compression c);
+
+/// @brief How writeVdb() writes.
+struct WriteOptions
+{
+    Compression compression = Compression::Blosc;
+    /// Float, double and vector values as 16-bit halves on disk (grids flagged as
+    /// saveFloatAsHalf, as OpenVDB and Houdini write them); values read back within half
+    /// precision.
+    bool half = false;
+    /// Bytes of compressed leaf buffers held at once; 0: a quarter of util::memoryBudget().
+    /// A grid whose buffers may need more is compressed twice (once to size the delayed-load
+    /// table, once while streaming), as OpenVDB does.
+    std::uint64_t bufferLimit = 0;
+};
+
+/// @brief Write @a grids in OpenVDB's file format to @a stream (seekable): the bytes
+/// openvdb::io::File::write writes, but for the file's random UUID, with every leaf compressed
+/// in parallel (TBB), once.
+/// @details For each grid of the seven types with delayed-load tables (float, double, int32,
+/// int64 and the three vec3 types): the grid's record (descriptor, compression flags,
+/// metadata with the file_* statistics, compression and delayed-load table io::File adds,
+/// transform, topology) by OpenVDB's own functions, then the leaf buffers, each written by
+/// OpenVDB's LeafNode::writeBuffers on a per-task stream and streamed in file order. Other grid
+/// types and grids sharing a tree are written by OpenVDB's Archive itself.
+void writeVdbStream(std::ostream& stream, const openvdb::GridCPtrVec& grids,
+                    const openvdb::MetaMap& fileMetadata, const WriteOptions& options);
+
+/// @brief Write @a grids to @a path atomically (writeFileAtomically) with writeVdbStream().
 /// @details The grids go to a temporary file in the same folder (`.NAME.tmp-PID-N`), which is
 /// flushed, synced and renamed over @a path: a failure (a full disk, say) or a kill leaves
 /// either the old file or the complete new one, never a partial or clobbered @a path. After an
 /// error the temporary file is removed (the CLI's signal handler removes it too); only SIGKILL
-/// during the write can leave it behind (hidden, named after the output and the process id). Every stream error is checked, unlike
-/// io::File::write.
+/// during the write can leave it behind (hidden, named after the output and the process id).
+/// Every stream error is checked, unlike io::File::write.
 /// @throw openvdb::IoError naming the path and the reason
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
-              const openvdb::MetaMap& fileMetadata = openvdb::MetaMap());
+              const openvdb::MetaMap& fileMetadata = openvdb::MetaMap(),
+              const WriteOptions& options = WriteOptions());
 
 /// @brief Read every grid of a .vdb file: topology and metadata now, voxel values on first
 /// access (OpenVDB's delayed loading), after checking the file's layout.
@@ -48,7 +88,8 @@ struct GridRef
 void stampGrid(openvdb::GridBase& grid, const std::string& source);
 
 /// @brief writeVdb() with the file's `creator` metadata set to this ivdb version.
-void writeVdbStamped(const std::string& path, const openvdb::GridCPtrVec& grids);
+void writeVdbStamped(const std::string& path, const openvdb::GridCPtrVec& grids,
+                     const WriteOptions& options = WriteOptions());
 
 /// @brief Check a grid read from @a path before it is used: a finite, non-degenerate transform,
 /// every value (background, tiles and voxels) finite for float, double and vector grids, and a

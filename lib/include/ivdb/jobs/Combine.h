@@ -2,6 +2,7 @@
 #pragma once
 
 #include <ivdb/implicit/CsgOp.h>
+#include <ivdb/io/VdbFile.h>
 #include <ivdb/util/Interrupt.h>
 
 #include <openvdb/openvdb.h>
@@ -22,6 +23,7 @@ struct CombineOptions
     std::optional<double> p;          ///< set: a blend of this sharpness; unset: sharp CSG
     double tolerance = 0.05;          ///< a blend's allowed error from the bands' reach, voxels
     bool fog = false;                 ///< also a `density` fog volume
+    io::WriteOptions write;                ///< compression and half floats on disk
     util::Interrupter* interrupter = nullptr;
 };
 

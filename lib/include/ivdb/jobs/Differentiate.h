@@ -2,6 +2,7 @@
 #pragma once
 
 #include <ivdb/diff/Differential.h>
+#include <ivdb/io/VdbFile.h>
 #include <ivdb/util/Interrupt.h>
 
 #include <openvdb/openvdb.h>
@@ -21,6 +22,7 @@ struct GradientOptions
     int step = 1;               ///< difference step in voxels (limits::kStep)
     bool magnitude = false;     ///< also `gradient_magnitude`
     bool withInput = false;     ///< also copy the input level set into the output
+    io::WriteOptions write;     ///< compression and half floats on disk
 };
 
 struct GradientResult
@@ -45,6 +47,7 @@ struct CurvatureOptions
     std::string input, output, grid;
     CurvatureMethod method = CurvatureMethod::Mean;
     bool withInput = false;
+    io::WriteOptions write;     ///< compression and half floats on disk
 };
 
 struct CurvatureResult

@@ -3,6 +3,7 @@
 
 #include <ivdb/raster/Rasterize.h>
 #include <ivdb/scene/Scene.h>
+#include <ivdb/io/VdbFile.h>
 #include <ivdb/util/Interrupt.h>
 
 #include <openvdb/openvdb.h>
@@ -32,6 +33,7 @@ struct RasterizeOptions
     raster::Sampling sampling = raster::Sampling::Sparse;
     std::optional<raster::Distance> distance; ///< in place of the scene's distance
     bool fog = false;                      ///< also a `density` fog volume
+    io::WriteOptions write;                ///< compression and half floats on disk
     util::Interrupter* interrupter = nullptr; ///< progress and cancellation (may be null)
 };
 

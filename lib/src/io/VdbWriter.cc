@@ -1,0 +1,546 @@
+// SPDX-License-Identifier: Apache-2.0
+// The parallel .vdb writer: OpenVDB's file format, byte for byte as openvdb::io::File writes it
+// (but the file's random UUID), with the leaf buffers compressed once, in parallel.
+//
+// io::File writes a grid on one thread: it compresses every leaf once to size its delayed-load
+// table, then once more, one after another, to write it. Here each leaf is compressed once, by
+// OpenVDB's own LeafNode::writeBuffers on a per-task stream, in parallel; the table's entries
+// are read off the compressed bytes; and the bytes are streamed out in file order. Everything
+// else of a grid's record (descriptor, metadata, transform, topology) is written by OpenVDB's own
+// functions, in the order Archive::writeGrid writes it (Archive.cc:1360-1443 in 10.0.1).
+#include <ivdb/io/VdbFile.h>
+
+#include <ivdb/io/AtomicFile.h>
+#include <ivdb/util/System.h>
+
+#include <openvdb/io/Archive.h>
+#include <openvdb/io/Compression.h>
+#include <openvdb/io/DelayedLoadMetadata.h>
+#include <openvdb/io/GridDescriptor.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cstring>
+#include <map>
+#include <set>
+#include <sstream>
+#include <type_traits>
+
+namespace ivdb::io {
+
+const std::vector<std::string>& compressionNames()
+{
+    static const std::vector<std::string> names{"blosc", "zip", "none"};
+    return names;
+}
+
+std::uint32_t compressionFlags(Compression c)
+{
+    // Active-value (mask) compression always: lossless, and what every OpenVDB writer does.
+    switch (c) {
+    case Compression::Blosc: return openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK;
+    case Compression::Zip: return openvdb::io::COMPRESS_ZIP | openvdb::io::COMPRESS_ACTIVE_MASK;
+    case Compression::None: break;
+    }
+    return openvdb::io::COMPRESS_ACTIVE_MASK;
+}
+
+namespace {
+
+using openvdb::GridBase;
+using GridsWithLeafTables = openvdb::NumericGridTypes::Append<openvdb::Vec3GridTypes>;
+
+/// OpenVDB's archive, for the pieces of its writer that are protected: the file header, and the
+/// grids this writer leaves to it (types without delayed-load tables, instances).
+class ArchiveParts: public openvdb::io::Archive
+{
+public:
+    explicit ArchiveParts(std::uint32_t flags) { setCompression(flags); }
+    void header(std::ostream& os) const { writeHeader(os, /*seekable=*/true); }
+    void grid(openvdb::io::GridDescriptor& gd, const GridBase::ConstPtr& g, std::ostream& os) const
+    {
+        writeGrid(gd, g, os, /*seekable=*/true);
+    }
+    void instance(openvdb::io::GridDescriptor& gd, const GridBase::ConstPtr& g, std::ostream& os) const
+    {
+        writeGridInstance(gd, g, os, /*seekable=*/true);
+    }
+};
+
+/// A stream buffer that appends to a string (no copies, unlike std::ostringstream's str()).
+class StringSink: public std::streambuf
+{
+public:
+    explicit StringSink(std::string& s): mString(s) {}
+
+protected:
+    int_type overflow(int_type c) override
+    {
+        if (!traits_type::eq_int_type(c, traits_type::eof())) mString.push_back(char(c));
+        return traits_type::not_eof(c);
+    }
+    std::streamsize xsputn(const char* p, std::streamsize n) override
+    {
+        mString.append(p, std::size_t(n));
+        return n;
+    }
+    pos_type seekoff(off_type off, std::ios_base::seekdir dir, std::ios_base::openmode) override
+    {
+        // Only tellp().
+        return off == 0 && dir == std::ios_base::cur ? pos_type(off_type(mString.size()))
+                                                     : pos_type(off_type(-1));
+    }
+
+private:
+    std::string& mString;
+};
+
+/// The compressed buffers of a run of leaves, in file order, with each leaf's delayed-load entry.
+struct LeafChunk
+{
+    std::string bytes;
+    std::vector<std::int8_t> masks;   // MaskCompress code per leaf
+    std::vector<std::int64_t> sizes;  // the value block's bytes (with its int64 prefix) per leaf
+};
+
+/// Writes one grid of type GridT (one of the seven types with delayed-load tables).
+template<typename GridT>
+class GridWriter
+{
+public:
+    using TreeT = typename GridT::TreeType;
+    using LeafT = typename TreeT::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
+
+    GridWriter(const GridT& grid, std::uint32_t archiveFlags, std::uint64_t bufferLimit)
+        : mGrid(grid), mTree(grid.tree()), mFlags(archiveFlags), mBufferLimit(bufferLimit),
+          mHalf(grid.saveFloatAsHalf()), mLeaves(mTree)
+    {
+        // The grid's own flags: zip is never used for level sets and fog volumes.
+        mGridFlags = archiveFlags;
+        if (grid.getGridClass() == openvdb::GRID_LEVEL_SET ||
+            grid.getGridClass() == openvdb::GRID_FOG_VOLUME) {
+            mGridFlags &= ~openvdb::io::COMPRESS_ZIP;
+        }
+    }
+
+    /// The grid's record after its descriptor: flags, metadata, transform, topology, buffers.
+    /// @a blockPos receives the stream position where the buffers start.
+    void write(std::ostream& os, std::int64_t& blockPos)
+    {
+        const std::size_t n = mLeaves.leafCount();
+        // Hold every leaf's compressed bytes if they fit (a bound: the uncompressed values),
+        // else find the table's sizes first and compress again while streaming.
+        const double bound = double(n) * double(LeafT::NodeMaskType::memUsage() + 1 + LeafT::SIZE * sizeof(ValueT) + 8);
+        std::vector<LeafChunk> chunks;
+        const bool holdAll = bound <= double(mBufferLimit);
+        if (holdAll) chunks = compress(0, n);
+        openvdb::io::DelayedLoadMetadata table;
+        if (n > 0) {
+            table.resizeMask(n);
+            if (hasSizes()) table.resizeCompressedSize(n);
+            std::size_t index = 0;
+            auto record = [&](const LeafChunk& c) {
+                for (std::size_t k = 0; k < c.masks.size(); ++k, ++index) {
+                    table.setMask(index, c.masks[k]);
+                    if (hasSizes()) table.setCompressedSize(index, c.sizes[k]);
+                }
+            };
+            if (holdAll) {
+                for (const auto& c : chunks) record(c);
+            } else {
+                for (std::size_t b = 0; b < n; b += kStreamLeaves) {
+                    for (const auto& c : compress(b, std::min(n, b + kStreamLeaves))) record(c);
+                }
+            }
+        }
+        const auto w = [&os](const void* p, std::size_t len) {
+            os.write(static_cast<const char*>(p), std::streamsize(len));
+        };
+        openvdb::io::setDataCompression(os, mGridFlags);
+        w(&mGridFlags, sizeof(mGridFlags));
+        // The metadata of a shallow copy, with the entries io::File adds.
+        auto copy = openvdb::ConstPtrCast<GridBase>(mGrid.copyGrid());
+        copy->insertMeta("file_delayed_load", table);
+        copy->addStatsMetadata();
+        copy->insertMeta("file_compression",
+                         openvdb::StringMetadata(openvdb::io::compressionToString(mGridFlags)));
+        copy->writeMeta(os);
+        mGrid.writeTransform(os);
+        mGrid.writeTopology(os);
+        blockPos = std::int64_t(os.tellp());
+        if (holdAll) {
+            for (const auto& c : chunks) w(c.bytes.data(), c.bytes.size());
+        } else {
+            for (std::size_t b = 0; b < n; b += kStreamLeaves) {
+                for (const auto& c : compress(b, std::min(n, b + kStreamLeaves))) {
+                    w(c.bytes.data(), c.bytes.size());
+                }
+            }
+        }
+    }
+
+private:
+    /// Leaves compressed per task; and, when the buffers do not all fit, per streamed batch.
+    static constexpr std::size_t kTaskLeaves = 64;
+    static constexpr std::size_t kStreamLeaves = 16384;
+
+    bool hasSizes() const
+    {
+        return (mFlags & (openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ZIP)) != 0;
+    }
+
+    /// Leaves [begin, end) compressed in parallel, in chunks of kTaskLeaves, by OpenVDB's own
+    /// LeafNode::writeBuffers on a stream with the state Archive::writeGrid gives its stream.
+    std::vector<LeafChunk> compress(std::size_t begin, std::size_t end) const
+    {
+        std::vector<LeafChunk> chunks((end - begin + kTaskLeaves - 1) / kTaskLeaves);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks.size(), 1),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t c = r.begin(); c != r.end(); ++c) {
+                const std::size_t from = begin + c * kTaskLeaves;
+                const std::size_t to = std::min(end, from + kTaskLeaves);
+                chunks[c] = compressChunk(from, to);
+            }
+        });
+        return chunks;
+    }
+
+    /// What io::MaskCompress finds (its code and inactive values), with the same decisions, but
+    /// visiting a word's inactive voxels through its set bits instead of an iterator.
+    struct MaskInfo
+    {
+        std::int8_t metadata;
+        ValueT inactiveVal[2];
+    };
+
+    static MaskInfo maskCompress(const typename LeafT::NodeMaskType& on, const ValueT* src,
+                                 const ValueT& background)
+    {
+        namespace vio = openvdb::io;
+        using openvdb::math::isExactlyEqual;
+        MaskInfo r;
+        r.inactiveVal[0] = r.inactiveVal[1] = background;
+        int unique = 0;
+        if constexpr (std::is_same_v<ValueT, float>) {
+            // Floats: find the first two distinct inactive values, then check with one
+            // branch-free pass (it vectorizes) that every inactive value is one of them.
+            unique = twoInactiveValues(on, src, r.inactiveVal);
+            if (unique < 0) unique = 3;
+        } else {
+            unique = countInactiveValues(on, src, r.inactiveVal);
+        }
+        const ValueT minusBg = openvdb::math::negative(background);
+
+        ValueT* val = r.inactiveVal;
+        r.metadata = vio::NO_MASK_OR_INACTIVE_VALS;
+        if (unique == 1) {
+            if (!isExactlyEqual(val[0], background)) {
+                r.metadata = isExactlyEqual(val[0], minusBg) ? vio::NO_MASK_AND_MINUS_BG
+                                                             : vio::NO_MASK_AND_ONE_INACTIVE_VAL;
+            }
+        } else if (unique == 2) {
+            if (!isExactlyEqual(val[0], background) && !isExactlyEqual(val[1], background)) {
+                r.metadata = vio::MASK_AND_TWO_INACTIVE_VALS;
+            } else if (isExactlyEqual(val[1], background)) {
+                r.metadata = isExactlyEqual(val[0], minusBg) ? vio::MASK_AND_NO_INACTIVE_VALS
+                                                             : vio::MASK_AND_ONE_INACTIVE_VAL;
+            } else if (isExactlyEqual(val[0], background)) {
+                r.metadata = isExactlyEqual(val[1], minusBg) ? vio::MASK_AND_NO_INACTIVE_VALS
+                                                             : vio::MASK_AND_ONE_INACTIVE_VAL;
+                std::swap(val[0], val[1]);
+            }
+        } else if (unique > 2) {
+            r.metadata = vio::NO_MASK_AND_ALL_VALS;
+        }
+        return r;
+    }
+
+    /// The number of distinct inactive values (counting stops at 3), with the first two in order
+    /// in @a val, as io::MaskCompress counts them (exact equality), visiting a word's inactive
+    /// voxels through its set bits.
+    static int countInactiveValues(const typename LeafT::NodeMaskType& on, const ValueT* src,
+                                   ValueT* val)
+    {
+        using openvdb::math::isExactlyEqual;
+        int unique = 0;
+        for (openvdb::Index w = 0; w < LeafT::NodeMaskType::WORD_COUNT && unique < 3; ++w) {
+            for (openvdb::Index64 bits = ~on.template getWord<openvdb::Index64>(w); bits && unique < 3;
+                 bits &= bits - 1) {
+                const ValueT& v = src[w * 64 + openvdb::Index(openvdb::util::FindLowestOn(bits))];
+                const bool seen = (unique > 0 && isExactlyEqual(v, val[0])) ||
+                                  (unique > 1 && isExactlyEqual(v, val[1]));
+                if (seen) continue;
+                if (unique < 2) val[unique] = v;
+                ++unique;
+            }
+        }
+        return unique;
+    }
+
+    /// For float leaves: the number of distinct inactive values (0, 1 or 2) with the first two in
+    /// order in @a val, as countInactiveValues counts them, or -1 if there are more.
+    static int twoInactiveValues(const typename LeafT::NodeMaskType& on, const float* src, float* val)
+    {
+        constexpr openvdb::Index kWords = LeafT::NodeMaskType::WORD_COUNT;
+        int found = 0;
+        for (openvdb::Index w = 0; w < kWords && found < 2; ++w) {
+            for (openvdb::Index64 bits = ~on.template getWord<openvdb::Index64>(w); bits && found < 2;
+                 bits &= bits - 1) {
+                const float v = src[w * 64 + openvdb::Index(openvdb::util::FindLowestOn(bits))];
+                if (found == 1 && v == val[0]) continue;
+                val[found++] = v;
+            }
+        }
+        if (found < 2) return found; // at most one distinct value (or none): the loop is done
+        const float a = val[0], b = val[1];
+        for (openvdb::Index w = 0; w < kWords; ++w) {
+            openvdb::Index64 other = 0;
+            for (int k = 0; k < 64; ++k) {
+                const float v = src[w * 64 + k];
+                other |= openvdb::Index64(!(v == a) & !(v == b)) << k;
+            }
+            if (other & ~on.template getWord<openvdb::Index64>(w)) return -1;
+        }
+        return 2;
+    }
+
+    /// LeafNode::writeBuffers(os, false) of a leaf with active-value compression, written with
+    /// loops over the masks' words instead of per-voxel bit tests: the same bytes (the tests
+    /// compare whole files with io::File's), in about half the time before the codec. Half
+    /// values and the other compressions go through OpenVDB's own writeBuffers.
+    void writeLeaf(std::ostream& os, const LeafT& leaf) const
+    {
+        using MaskT = typename LeafT::NodeMaskType;
+        namespace vio = openvdb::io;
+        const MaskT& on = leaf.valueMask();
+        on.save(os);
+        const ValueT* src = leaf.buffer().data();
+        const MaskInfo mc = maskCompress(on, src, mTree.background());
+        const std::int8_t code = mc.metadata;
+        os.write(reinterpret_cast<const char*>(&code), 1);
+        if (code == vio::NO_MASK_AND_ONE_INACTIVE_VAL || code == vio::MASK_AND_ONE_INACTIVE_VAL ||
+            code == vio::MASK_AND_TWO_INACTIVE_VALS) {
+            os.write(reinterpret_cast<const char*>(&mc.inactiveVal[0]), sizeof(ValueT));
+            if (code == vio::MASK_AND_TWO_INACTIVE_VALS) {
+                os.write(reinterpret_cast<const char*>(&mc.inactiveVal[1]), sizeof(ValueT));
+            }
+        }
+        if (code == vio::NO_MASK_AND_ALL_VALS) {
+            vio::writeData(os, src, LeafT::SIZE, mGridFlags);
+            return;
+        }
+        ValueT active[LeafT::SIZE];
+        openvdb::Index count = 0;
+        const bool selection = code == vio::MASK_AND_NO_INACTIVE_VALS ||
+                               code == vio::MASK_AND_ONE_INACTIVE_VAL ||
+                               code == vio::MASK_AND_TWO_INACTIVE_VALS;
+        MaskT select;
+        for (openvdb::Index w = 0; w < MaskT::WORD_COUNT; ++w) {
+            const openvdb::Index64 word = on.template getWord<openvdb::Index64>(w);
+            for (openvdb::Index64 bits = word; bits; bits &= bits - 1) {
+                active[count++] = src[w * 64 + openvdb::Index(openvdb::util::FindLowestOn(bits))];
+            }
+            if (!selection) continue;
+            // The inactive voxels that hold the second inactive value.
+            openvdb::Index64 pick = 0;
+            for (openvdb::Index64 bits = ~word; bits; bits &= bits - 1) {
+                const openvdb::Index b = openvdb::Index(openvdb::util::FindLowestOn(bits));
+                if (openvdb::math::isExactlyEqual(src[w * 64 + b], mc.inactiveVal[1])) {
+                    pick |= openvdb::Index64(1) << b;
+                }
+            }
+            select.template getWord<openvdb::Index64>(w) = pick;
+        }
+        if (selection) select.save(os);
+        vio::writeData(os, active, count, mGridFlags);
+    }
+
+    LeafChunk compressChunk(std::size_t from, std::size_t to) const
+    {
+        LeafChunk out;
+        out.bytes.reserve((to - from) * (LeafT::SIZE * sizeof(ValueT) / 2));
+        StringSink sink(out.bytes);
+        std::ostream os(&sink);
+        openvdb::io::setDataCompression(os, mGridFlags);
+        openvdb::io::setGridBackgroundValuePtr(os, &mTree.background());
+        std::vector<std::streamoff> ends;
+        for (std::size_t i = from; i < to; ++i) {
+            const LeafT& leaf = mLeaves.leaf(i);
+            if (mHalf || !(mGridFlags & openvdb::io::COMPRESS_ACTIVE_MASK)) {
+                leaf.writeBuffers(os, mHalf);
+            } else {
+                writeLeaf(os, leaf);
+            }
+            ends.push_back(os.tellp());
+            // The delayed-load entry's mask code, as Archive's PopulateDelayedLoadMetadataOp
+            // makes it: with active-value compression the stream holds it (read below).
+            if (!(mGridFlags & openvdb::io::COMPRESS_ACTIVE_MASK)) {
+                out.masks.push_back(std::int8_t(openvdb::io::MaskCompress<ValueT, typename LeafT::NodeMaskType>(
+                    leaf.valueMask(), typename LeafT::NodeMaskType(), leaf.buffer().data(),
+                    mTree.background()).metadata));
+            }
+        }
+        if (mGridFlags & openvdb::io::COMPRESS_ACTIVE_MASK) {
+            std::streamoff begin = 0;
+            for (const std::streamoff end : ends) {
+                out.masks.push_back(std::int8_t(out.bytes[std::size_t(
+                    begin + std::streamoff(LeafT::NodeMaskType::memUsage()))]));
+                begin = end;
+            }
+        }
+        if (hasSizes()) {
+            std::streamoff begin = 0;
+            for (std::size_t k = 0; k < ends.size(); ++k) {
+                out.sizes.push_back(valueBlockSize(mLeaves.leaf(from + k), out.masks[k], out.bytes,
+                                                   begin, ends[k]));
+                begin = ends[k];
+            }
+        }
+        return out;
+    }
+
+    /// The bytes of a leaf's value block (int64 prefix included), as
+    /// io::writeCompressedValuesSize() + 8 gives it, read off the leaf's written bytes.
+    std::int64_t valueBlockSize(const LeafT& leaf, std::int8_t mask, const std::string& bytes,
+                                std::streamoff begin, std::streamoff end) const
+    {
+        if ((mFlags & openvdb::io::COMPRESS_ZIP) && !(mGridFlags & openvdb::io::COMPRESS_ZIP)) {
+            // The table is sized for the archive's zip, though the level set's data is not zipped.
+            return 8 + std::int64_t(openvdb::io::writeCompressedValuesSize(
+                leaf.buffer().data(), LeafT::SIZE, leaf.valueMask(), std::uint8_t(mask), mHalf, mFlags));
+        }
+        // Skip the value mask and the mask code, then the inactive values and the selection mask
+        // the stream's own code implies.
+        std::streamoff pos = begin + std::streamoff(LeafT::NodeMaskType::memUsage());
+        namespace vio = openvdb::io;
+        const int code = static_cast<unsigned char>(bytes[std::size_t(pos)]);
+        pos += 1;
+        if (code == vio::NO_MASK_AND_ONE_INACTIVE_VAL || code == vio::MASK_AND_ONE_INACTIVE_VAL) {
+            pos += sizeof(ValueT);
+        } else if (code == vio::MASK_AND_TWO_INACTIVE_VALS) {
+            pos += 2 * sizeof(ValueT);
+        }
+        if (code == vio::MASK_AND_NO_INACTIVE_VALS || code == vio::MASK_AND_ONE_INACTIVE_VAL ||
+            code == vio::MASK_AND_TWO_INACTIVE_VALS) {
+            pos += std::streamoff(LeafT::NodeMaskType::memUsage());
+        }
+        // Half values with no active voxel write nothing, not even the prefix; the table says 8.
+        if (pos == end) return 8;
+        std::int64_t prefix = 0;
+        std::memcpy(&prefix, bytes.data() + pos, sizeof(prefix));
+        return 8 + (prefix < 0 ? -prefix : prefix);
+    }
+
+    const GridT& mGrid;
+    const TreeT& mTree;
+    const std::uint32_t mFlags;
+    std::uint32_t mGridFlags = 0;
+    const std::uint64_t mBufferLimit;
+    const bool mHalf;
+    openvdb::tree::LeafManager<const TreeT> mLeaves;
+};
+
+/// The unique names Archive::write gives the grids (GridDescriptor::addSuffix): a name shared by
+/// several grids, or empty, gets "\x1e" and the lowest number not yet taken.
+std::vector<std::string> uniqueNames(const openvdb::GridCPtrVec& grids)
+{
+    std::map<std::string, int> count;
+    for (const auto& g : grids) ++count[g->getName()];
+    std::set<std::string> taken;
+    std::vector<std::string> out;
+    for (const auto& g : grids) {
+        std::string name = g->getName();
+        if (name.empty() || count[name] > 1) name = openvdb::io::GridDescriptor::addSuffix(name, 0);
+        for (int n = 1; taken.count(name); ++n) {
+            name = openvdb::io::GridDescriptor::addSuffix(g->getName(), n);
+        }
+        taken.insert(name);
+        out.push_back(name);
+    }
+    return out;
+}
+
+/// One grid's record: the descriptor, then the record, then the descriptor's three offsets
+/// patched in (as Archive::writeGrid does; the output is a file).
+template<typename GridT>
+void writeTypedGrid(std::ostream& os, const std::string& name, const GridT& grid,
+                    std::uint32_t flags, std::uint64_t bufferLimit)
+{
+    openvdb::io::GridDescriptor gd(name, grid.type(), grid.saveFloatAsHalf());
+    gd.writeHeader(os);
+    const std::streamoff offsets = os.tellp();
+    gd.writeStreamPos(os); // zeros for now
+    gd.setGridPos(std::int64_t(os.tellp()));
+    std::int64_t blockPos = 0;
+    GridWriter<GridT>(grid, flags, bufferLimit).write(os, blockPos);
+    gd.setBlockPos(blockPos);
+    gd.setEndPos(std::int64_t(os.tellp()));
+    os.seekp(offsets);
+    gd.writeStreamPos(os);
+    gd.seekToEnd(os);
+}
+
+} // namespace
+
+void writeVdbStream(std::ostream& os, const openvdb::GridCPtrVec& input,
+                    const openvdb::MetaMap& fileMetadata, const WriteOptions& options)
+{
+    const std::uint32_t flags = compressionFlags(options.compression);
+    const std::uint64_t bufferLimit =
+        options.bufferLimit ? options.bufferLimit : std::uint64_t(util::memoryBudget() / 4.0);
+    openvdb::GridCPtrVec grids;
+    for (const auto& g : input) {
+        if (!g) continue;
+        if (options.half && !g->saveFloatAsHalf()) {
+            // Half floats on disk: a shallow copy flagged as OpenVDB flags it.
+            auto copy = openvdb::ConstPtrCast<GridBase>(g->copyGrid());
+            copy->setSaveFloatAsHalf(true);
+            grids.push_back(copy);
+        } else {
+            grids.push_back(g);
+        }
+    }
+    ArchiveParts archive(flags);
+    openvdb::io::setDataCompression(os, flags);
+    openvdb::io::setWriteGridStatsMetadata(os, true);
+    archive.header(os);
+    fileMetadata.writeMeta(os);
+    const std::int32_t count = std::int32_t(grids.size());
+    os.write(reinterpret_cast<const char*>(&count), sizeof(count));
+    const std::vector<std::string> names = uniqueNames(grids);
+    std::map<const openvdb::TreeBase*, std::pair<std::string, bool>> written; // tree -> name, half
+    for (std::size_t i = 0; i < grids.size(); ++i) {
+        const GridBase::ConstPtr& g = grids[i];
+        const auto shared = written.find(&g->baseTree());
+        if (shared != written.end() && shared->second.second == g->saveFloatAsHalf()) {
+            // A grid that shares an earlier grid's tree: OpenVDB's instance record.
+            openvdb::io::GridDescriptor gd(names[i], g->type(), g->saveFloatAsHalf());
+            gd.setInstanceParentName(shared->second.first);
+            archive.instance(gd, g, os);
+        } else {
+            written[&g->baseTree()] = {names[i], g->saveFloatAsHalf()};
+            const bool typed = g->apply<GridsWithLeafTables>([&](const auto& typedGrid) {
+                writeTypedGrid(os, names[i], typedGrid, flags, bufferLimit);
+            });
+            if (!typed) {
+                openvdb::io::GridDescriptor gd(names[i], g->type(), g->saveFloatAsHalf());
+                archive.grid(gd, g, os);
+            }
+        }
+        openvdb::io::setDataCompression(os, flags);
+    }
+}
+
+void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
+              const openvdb::MetaMap& fileMetadata, const WriteOptions& options)
+{
+    writeFileAtomically(path, [&](std::ostream& os) {
+        writeVdbStream(os, grids, fileMetadata, options);
+    });
+}
+
+} // namespace ivdb::io

@@ -1,0 +1,182 @@
+// SPDX-License-Identifier: Apache-2.0
+// The parallel .vdb writer against OpenVDB's own: for the same grids and compression, the file
+// io::File::write makes, byte for byte but for the random UUID; read back by OpenVDB.
+#include <ivdb/io/VdbFile.h>
+
+#include <ivdb/diff/Differential.h>
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <openvdb/tools/LevelSetUtil.h>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+
+#include <tbb/global_control.h>
+
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+class TestVdbWriter: public ::testing::Test
+{
+protected:
+    void SetUp() override
+    {
+        openvdb::initialize();
+        static std::atomic<int> counter{0};
+        mDir = fs::temp_directory_path() /
+               ("ivdb-test-writer-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+        fs::remove_all(mDir);
+        fs::create_directories(mDir);
+    }
+    void TearDown() override
+    {
+        std::error_code ec;
+        fs::remove_all(mDir, ec);
+    }
+    std::string path(const std::string& name) const { return (mDir / name).string(); }
+
+    static std::string bytes(const std::string& file)
+    {
+        std::ifstream in(file, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+
+    /// The same grids written by io::File and by ivdb: equal bytes but the UUID (36 bytes at
+    /// offset 21, after the magic number, the format and library versions and the offsets flag).
+    void expectSameFile(const openvdb::GridCPtrVec& grids, ivdb::io::Compression c,
+                        const std::string& what, std::uint64_t bufferLimit = 0)
+    {
+        openvdb::MetaMap meta;
+        meta.insertMeta("creator", openvdb::StringMetadata("test"));
+        {
+            openvdb::io::File f(path("openvdb.vdb"));
+            f.setCompression(ivdb::io::compressionFlags(c));
+            f.write(grids, meta);
+            f.close();
+        }
+        ivdb::io::WriteOptions options;
+        options.compression = c;
+        options.bufferLimit = bufferLimit;
+        ivdb::io::writeVdb(path("ivdb.vdb"), grids, meta, options);
+        std::string a = bytes(path("openvdb.vdb")), b = bytes(path("ivdb.vdb"));
+        ASSERT_EQ(a.size(), b.size()) << what;
+        ASSERT_GT(a.size(), 57u);
+        EXPECT_NE(a.substr(21, 36), b.substr(21, 36)) << what << ": the UUID is new per file";
+        a.replace(21, 36, 36, '-');
+        b.replace(21, 36, 36, '-');
+        std::size_t first = 0;
+        while (first < a.size() && a[first] == b[first]) ++first;
+        EXPECT_EQ(first, a.size()) << what << ": first difference at byte " << first << " of "
+                                   << a.size();
+        // And OpenVDB reads ours.
+        openvdb::io::File f(path("ivdb.vdb"));
+        f.open();
+        EXPECT_EQ(f.getGrids()->size(), grids.size()) << what;
+        f.close();
+    }
+
+    fs::path mDir;
+};
+
+openvdb::FloatGrid::Ptr sphere(float radius, float dx, const std::string& name = "surface")
+{
+    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(radius, openvdb::Vec3f(0.1f),
+                                                                      dx, 3.0f);
+    g->setName(name);
+    return g;
+}
+
+TEST_F(TestVdbWriter, SameBytesAsOpenVdbForEveryKindOfGrid)
+{
+    auto s = sphere(1.0f, 0.02f);
+    auto gradient = ivdb::diff::gradient(*s, 1);
+    auto empty = openvdb::FloatGrid::create(1.0f);
+    auto density = s->deepCopy();
+    openvdb::tools::sdfToFogVolume(*density);
+    density->setName("density");
+    auto doubles = openvdb::DoubleGrid::create(2.0);
+    doubles->setName("doubles");
+    doubles->tree().setValue(openvdb::Coord(1, 2, 3), 4.5);
+    doubles->tree().setValue(openvdb::Coord(-100, 7, 3), -1.5);
+    auto ints = openvdb::Int32Grid::create(0);
+    ints->setName("ints");
+    ints->tree().fill(openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(20)), 7, true);
+    ints->tree().setValueOff(openvdb::Coord(3, 3, 3), 9);
+    auto bools = openvdb::BoolGrid::create(false);
+    bools->setName("bools");
+    bools->tree().setValue(openvdb::Coord(5), true);
+    // Float leaves with every mask-compression case: inactive values that are one other value,
+    // two others, the background and another, three or more, and NaN (never equal to itself).
+    auto assorted = openvdb::FloatGrid::create(0.5f);
+    assorted->setName("assorted");
+    {
+        auto acc = assorted->getAccessor();
+        const float inactive[][3] = {{2.0f, 2.0f, 2.0f}, {2.0f, 3.0f, 2.0f}, {0.5f, 3.0f, 0.5f},
+                                     {1.0f, 2.0f, 3.0f}, {-0.5f, 0.5f, -0.5f},
+                                     {std::nanf(""), 1.0f, 1.0f}, {-0.0f, 0.0f, -0.0f}};
+        for (int leaf = 0; leaf < 7; ++leaf) {
+            for (int k = 0; k < 512; ++k) {
+                const openvdb::Coord c(leaf * 8 + (k >> 6), (k >> 3) & 7, k & 7);
+                if (k % 3 == 0) acc.setValueOn(c, float(k) * 0.25f);
+                else acc.setValueOff(c, inactive[leaf][k % 3 == 1 ? 0 : (k % 2 ? 1 : 2)]);
+            }
+        }
+    }
+    auto twin = s->copyGrid(); // shares the tree: an instance record
+    twin->setName("twin");
+    auto dup1 = sphere(0.3f, 0.05f, "dup"), dup2 = sphere(0.4f, 0.05f, "dup");
+    const openvdb::GridCPtrVec all{s, gradient, density, doubles, ints, bools, empty, assorted, twin,
+                                   dup1, dup2};
+    for (auto c : {ivdb::io::Compression::Blosc, ivdb::io::Compression::Zip, ivdb::io::Compression::None}) {
+        const std::string what = ivdb::io::compressionNames()[std::size_t(c)];
+        expectSameFile(all, c, what);
+        // The streaming path (every leaf compressed twice, as OpenVDB does) makes the same bytes.
+        expectSameFile({s, gradient}, c, what + ", streamed", /*bufferLimit=*/1);
+    }
+}
+
+TEST_F(TestVdbWriter, SameBytesForHalfFloatsAndOneThread)
+{
+    auto s = sphere(1.0f, 0.02f);
+    auto half = s->deepCopy();
+    half->setName("half");
+    half->setSaveFloatAsHalf(true);
+    auto gradient = ivdb::diff::gradient(*s, 1);
+    gradient->setSaveFloatAsHalf(true);
+    expectSameFile({s, half, gradient}, ivdb::io::Compression::Blosc, "half floats");
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    expectSameFile({s, half}, ivdb::io::Compression::Blosc, "one thread");
+}
+
+TEST_F(TestVdbWriter, HalfOptionFlagsFloatGrids)
+{
+    auto s = sphere(1.0f, 0.02f);
+    ivdb::io::WriteOptions options;
+    options.half = true;
+    ivdb::io::writeVdb(path("h.vdb"), {s}, openvdb::MetaMap(), options);
+    EXPECT_FALSE(s->saveFloatAsHalf()) << "the caller's grid is not changed";
+    openvdb::io::File f(path("h.vdb"));
+    f.open();
+    auto back = openvdb::gridPtrCast<openvdb::FloatGrid>(f.readGrid("surface"));
+    f.close();
+    EXPECT_TRUE(back->saveFloatAsHalf());
+    ASSERT_EQ(back->activeVoxelCount(), s->activeVoxelCount());
+    auto acc = back->getConstAccessor();
+    for (auto it = s->cbeginValueOn(); it; ++it) {
+        // Half precision: 11 significant bits.
+        ASSERT_NEAR(acc.getValue(it.getCoord()), *it, std::abs(*it) * 1e-3f + 1e-7f);
+    }
+}
+
+} // namespace
