@@ -19,12 +19,9 @@
 
 #include <benchmark/benchmark.h>
 
-#include <tbb/global_control.h>
 
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <fstream>
 #include <map>
 #include <string>
 #include <unistd.h>
@@ -101,48 +98,6 @@ void BM_Rasterize_QuadricSphere(benchmark::State& state)
         benchmark::DoNotOptimize(g.get());
     }
     setCounters(state, *g);
-}
-
-std::string tempPath()
-{
-    return "/tmp/ivdb_bench_" + std::to_string(::getpid()) + ".vdb";
-}
-
-void BM_WriteVdb_Atomic(benchmark::State& state)
-{
-    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
-        1.0f, openvdb::Vec3f(0.0f), 1.0f / float(state.range(0)), 3.0f);
-    const std::string path = tempPath();
-    for (auto _ : state) io::writeVdb(path, {g});
-    std::remove(path.c_str());
-}
-
-// The parallel writer alone (no fsync, as io::File): range(0) radius in voxels, range(1) threads.
-void BM_WriteVdb_Stream(benchmark::State& state)
-{
-    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
-        1.0f, openvdb::Vec3f(0.0f), 1.0f / float(state.range(0)), 3.0f);
-    const std::string path = tempPath();
-    tbb::global_control threads(tbb::global_control::max_allowed_parallelism,
-                                std::size_t(state.range(1)));
-    for (auto _ : state) {
-        std::ofstream os(path, std::ios::binary | std::ios::trunc);
-        io::writeVdbStream(os, {g}, openvdb::MetaMap(), io::WriteOptions());
-    }
-    std::remove(path.c_str());
-}
-
-void BM_OpenVDB_FileWrite(benchmark::State& state)
-{
-    auto g = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
-        1.0f, openvdb::Vec3f(0.0f), 1.0f / float(state.range(0)), 3.0f);
-    const std::string path = tempPath();
-    for (auto _ : state) {
-        openvdb::io::File f(path);
-        f.write({g});
-        f.close();
-    }
-    std::remove(path.c_str());
 }
 
 openvdb::FloatGrid::Ptr benchSphere(int radiusVoxels)
@@ -292,9 +247,6 @@ BENCHMARK(BM_Rasterize_Dense)->Arg(50)->Arg(100)->Arg(200)->Arg(400)
     ->ReportAggregatesOnly(true);
 BENCHMARK(BM_Rasterize_QuadricSphere)->Arg(100)->Arg(200)->Arg(400)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_WriteVdb_Atomic)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_OpenVDB_FileWrite)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_WriteVdb_Stream)->Args({400, 1})->Args({400, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 int main(int argc, char** argv)
 {

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/io/AtomicFile.h>
 
+#include "FileOutput.h"
+
 #include <openvdb/Exceptions.h>
 
 #include <atomic>
@@ -9,7 +11,8 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
+#include <ostream>
+#include <system_error>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -89,21 +92,23 @@ void writeFileAtomically(const std::string& path,
     struct PendingGuard { ~PendingGuard() { clearPending(); } } pendingGuard;
     setPending(tmp);
     try {
+        const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+        if (fd < 0) ioError(path, std::string("cannot create a file there: ") + std::strerror(errno));
+        struct FdGuard { int fd; ~FdGuard() { if (fd >= 0) ::close(fd); } } guard{fd};
         {
-            std::ofstream os;
+            FileOutputBuffer buffer(fd);
+            std::ostream os(&buffer);
             os.exceptions(std::ios::badbit | std::ios::failbit);
-            os.open(tmp, std::ios::out | std::ios::binary | std::ios::trunc);
             write(os);
             os.flush();
-            os.close();
         }
-        const int fd = ::open(tmp.c_str(), O_RDONLY);
-        if (fd < 0 || ::fsync(fd) != 0) {
-            const int err = errno;
-            if (fd >= 0) ::close(fd);
-            ioError(path, std::string("cannot sync the written file: ") + std::strerror(err));
+        if (::fsync(fd) != 0) {
+            ioError(path, std::string("cannot sync the written file: ") + std::strerror(errno));
         }
-        ::close(fd);
+        guard.fd = -1;
+        if (::close(fd) != 0) {
+            ioError(path, std::string("cannot close the written file: ") + std::strerror(errno));
+        }
         if (std::rename(tmp.c_str(), path.c_str()) != 0) {
             ioError(path, std::string("cannot rename the temporary file into place: ") +
                               std::strerror(errno));
@@ -111,8 +116,9 @@ void writeFileAtomically(const std::string& path,
     } catch (const openvdb::IoError&) {
         std::remove(tmp.c_str());
         throw;
-    } catch (const std::ios_base::failure&) {
-        const int err = errno;
+    } catch (const std::ios_base::failure& e) {
+        // FileOutputBuffer's failures carry errno; the stream's own ones do not.
+        const int err = e.code().category() == std::generic_category() ? e.code().value() : errno;
         std::remove(tmp.c_str());
         ioError(path, std::string("cannot write: ") + (err ? std::strerror(err) : "stream error") +
                           " (is the disk full?)");

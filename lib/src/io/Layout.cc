@@ -3,6 +3,8 @@
 // sees it (see validateLayout in Layout.h).
 #include "Layout.h"
 
+#include "FileMapping.h"
+
 #include <openvdb/Metadata.h>
 #include <openvdb/io/Archive.h>
 #include <openvdb/io/Compression.h>
@@ -11,14 +13,10 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <vector>
 
 namespace ivdb::io {
-
-namespace fs = std::filesystem;
 
 namespace {
 
@@ -33,11 +31,8 @@ namespace {
 class LayoutReader
 {
 public:
-    LayoutReader(const std::string& path, std::uint64_t size): mPath(path), mSize(size)
-    {
-        mIn.open(path, std::ios::binary);
-        if (!mIn) ioError(path, std::string("cannot open: ") + std::strerror(errno));
-    }
+    LayoutReader(const std::string& path, const FileMapping& file)
+        : mPath(path), mData(file.data()), mSize(file.size()) {}
 
     std::uint64_t pos() const { return mPos; }
 
@@ -45,15 +40,14 @@ public:
     {
         if (pos > mSize) corrupt("an offset points past the end of the file");
         mPos = pos;
-        mIn.clear();
-        mIn.seekg(std::streamoff(pos));
     }
 
     void bytes(void* out, std::uint64_t n, std::uint64_t end)
     {
-        if (n > end || mPos > end - n) corrupt("it ends in the middle of a field (truncated?)");
-        mIn.read(static_cast<char*>(out), std::streamsize(n));
-        if (!mIn) corrupt("it cannot be read to the end (truncated?)");
+        if (n > end || end > mSize || mPos > end - n) {
+            corrupt("it ends in the middle of a field (truncated?)");
+        }
+        std::memcpy(out, mData + mPos, n);
         mPos += n;
     }
 
@@ -207,11 +201,10 @@ public:
     template<typename ReadFn>
     void readWithOpenVdb(std::uint64_t pos, ReadFn&& read)
     {
-        mIn.clear();
-        mIn.seekg(std::streamoff(pos));
-        read(static_cast<std::istream&>(mIn));
-        if (!mIn) corrupt("it cannot be read to the end (truncated?)");
-        seek(mPos);
+        MemoryStream in(mData, mSize);
+        in.seekg(std::streamoff(pos));
+        read(static_cast<std::istream&>(in));
+        if (!in) corrupt("it cannot be read to the end (truncated?)");
     }
 
     [[noreturn]] void corrupt(const std::string& why) const
@@ -221,8 +214,8 @@ public:
 
 private:
     std::string mPath;
+    const char* mData;
     std::uint64_t mSize, mPos = 0, mDelayedLoadAt = 0;
-    std::ifstream mIn;
 };
 
 /// What the root node's records of a tree type look like ("Tree_float_5_4_3", with an optional
@@ -336,6 +329,7 @@ public:
         const std::uint64_t count = std::uint64_t(1) << (3 * mLayout.nodeLog2.back());
         std::vector<std::uint64_t> mask(count / 64);
         for (std::uint64_t i = 0; i < mLeaves; ++i) {
+            if (mOffsets) mOffsets->push_back(mIn.pos());
             mIn.bytes(mask.data(), count / 8, mEnd);
             values(count, countOn(mask), count / 8);
         }
@@ -351,8 +345,15 @@ public:
         namespace vio = openvdb::io;
         const std::uint64_t count = std::uint64_t(1) << (3 * mLayout.nodeLog2.back());
         const bool maskCompressed = (mCompression & vio::COMPRESS_ACTIVE_MASK) != 0;
+        std::vector<std::uint64_t> mask(count / 64);
         for (std::uint64_t i = 0; i < mLeaves; ++i) {
-            mIn.skip(count / 8, mEnd); // value mask: the topology's is used
+            // The value mask is the topology's again: OpenVDB's delayed loading uses the
+            // topology's and a full load this one, so they must agree on the values stored.
+            if (mOffsets) mOffsets->push_back(mIn.pos());
+            mIn.bytes(mask.data(), count / 8, mEnd);
+            if (countOn(mask) != mLeafActive[i]) {
+                mIn.corrupt(mWhere + "has a leaf whose value mask differs from its topology's");
+            }
             Expect expect;
             if (!maskCompressed) {
                 expect.how = vio::NO_MASK_AND_ALL_VALS; // OpenVDB skips the byte and assumes this
@@ -367,6 +368,9 @@ public:
     }
 
     std::uint64_t leaves() const { return mLeaves; }
+
+    /// Record where each leaf's voxel data starts in @a offsets.
+    void recordOffsets(std::vector<std::uint64_t>* offsets) { mOffsets = offsets; }
 
     /// Where reading must stop from now on: the voxel data runs to the grid's end.
     void bound(std::uint64_t end) { mEnd = end; }
@@ -448,6 +452,7 @@ private:
     std::string mWhere;
     std::uint64_t mLeaves = 0;
     std::vector<std::uint16_t> mLeafActive; // active voxels per leaf, in file order
+    std::vector<std::uint64_t>* mOffsets = nullptr;
 };
 
 /// A grid's tree, from its root node on. OpenVDB reads the root's tile records without checking:
@@ -456,8 +461,8 @@ private:
 /// (nodeLog2), then the whole topology and the voxel data (to @a gridEnd), with the leaf count
 /// checked against the delayed-load table's (@a delayed, -1 without one).
 void checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t compression,
-                       std::uint64_t end, const std::string& grid, bool buffers,
-                       std::uint64_t gridEnd, std::int64_t delayed)
+               std::uint64_t end, const std::string& grid, bool buffers, std::uint64_t gridEnd,
+               std::int64_t delayed, GridLayout& out)
 {
     const std::string where = "grid '" + grid.substr(0, 64) + "' ";
     in.skip(4, end); // buffer count
@@ -500,6 +505,9 @@ void checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t compres
                    "of " + std::to_string(delayed));
     }
     // The voxel data: OpenVDB reads on from where the topology ended.
+    out.leaves.reserve(walker.leaves());
+    walker.recordOffsets(&out.leaves);
+    out.leavesWalked = true;
     if (buffers) {
         walker.leafBuffers();
         return;
@@ -516,21 +524,27 @@ void checkTree(LayoutReader& in, const TreeLayout& layout, std::uint32_t compres
 struct GridRecord
 {
     std::string name, type;
-    bool instance = false; // shares the tree of an earlier grid, so stores none
+    std::string parent; // the grid whose tree this one shares (so stores none), if any
+    bool instance = false;
     std::int64_t grid = 0, block = 0, end = 0;
 };
 
 /// One grid's bytes, from its compression flags on: metadata, transform and (unless it shares
 /// another grid's tree) the tree; with @a buffers, also its voxel data, which in a file without
 /// grid offsets is the only way to find where the next grid starts.
-void checkGrid(LayoutReader& in, const GridRecord& d, std::uint64_t end, bool buffers)
+GridLayout checkGrid(LayoutReader& in, const GridRecord& d, std::uint64_t end, bool buffers)
 {
     const std::string where = "grid '" + d.name.substr(0, 64) + "' ";
     const std::uint64_t start = in.pos();
+    GridLayout out;
+    out.uniqueName = d.name;
+    out.type = d.type;
+    out.parent = d.parent;
+    out.start = start;
     const std::uint32_t compression = in.u32(end);
     const std::int64_t delayed = in.metaMap(end);
     in.transform(end, d.name);
-    if (d.instance) return;
+    if (d.instance) return out;
     const TreeLayout layout = treeLayout(d.type);
     if (buffers && layout.nodeLog2.empty()) {
         in.corrupt(where + "is of type '" + d.type.substr(0, 64) + "', which ivdb reads only "
@@ -541,24 +555,25 @@ void checkGrid(LayoutReader& in, const GridRecord& d, std::uint64_t end, bool bu
         in.corrupt(where + "has a delayed-load table of " + std::to_string(delayed) +
                    " leaves, more than its bytes can hold");
     }
-    if (layout.valueBytes == 0) return;
-    checkTree(in, layout, compression, end, d.name, buffers, std::uint64_t(d.end), delayed);
+    if (layout.valueBytes == 0) return out;
+    checkTree(in, layout, compression, end, d.name, buffers, std::uint64_t(d.end), delayed, out);
+    return out;
 }
 
 } // namespace
 
-void validateLayout(const std::string& path)
+FileLayout validateLayout(const std::string& path, const FileMapping& file)
 {
-    std::error_code ec;
-    const std::uint64_t size = fs::file_size(path, ec);
-    if (ec) ioError(path, "cannot get the file size: " + ec.message());
+    const std::uint64_t size = file.size();
     if (size == 0) ioError(path, "is empty, not a .vdb file");
-    LayoutReader in(path, size);
+    LayoutReader in(path, file);
+    FileLayout result;
     std::int64_t magic = 0;
     if (size < 8) ioError(path, "is too short to be a .vdb file");
     in.bytes(&magic, 8, size);
     if (magic != openvdb::OPENVDB_MAGIC) ioError(path, "is not a .vdb file (no OpenVDB magic number)");
     const std::uint32_t version = in.u32(size);
+    result.fileVersion = version;
     // Older layouts differ, and OpenVDB reads them with fewer checks still; files that old (from
     // before OpenVDB 1.0) can be brought up to date by re-saving them with OpenVDB.
     if (version < openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION ||
@@ -569,10 +584,11 @@ void validateLayout(const std::string& path)
                 openvdb::OPENVDB_FILE_VERSION_NODE_MASK_COMPRESSION ? " (re-save it with OpenVDB's "
                 "vdb_tool: vdb_tool -read old.vdb -write new.vdb)" : " (a damaged file?)"));
     }
-    in.u32(size);           // library major
-    in.u32(size);           // library minor
+    result.libraryMajor = in.u32(size);
+    result.libraryMinor = in.u32(size);
     char hasOffsets = 0;
     in.bytes(&hasOffsets, 1, size);
+    result.hasGridOffsets = hasOffsets != 0;
     in.skip(36, size);      // UUID
     in.metaMap(size);       // file metadata
     const std::int32_t count = std::int32_t(in.u32(size));
@@ -582,7 +598,8 @@ void validateLayout(const std::string& path)
         GridRecord d;
         d.name = in.str(size);
         d.type = in.str(size);
-        d.instance = !in.str(size).empty(); // the grid whose tree this one shares, if any
+        d.parent = in.str(size);
+        d.instance = !d.parent.empty();
         d.grid = in.i64(size);
         d.block = in.i64(size);
         d.end = in.i64(size);
@@ -590,8 +607,10 @@ void validateLayout(const std::string& path)
     };
     if (!hasOffsets) {
         // A stream (io::Stream's layout) saved to a file: each grid follows its record.
-        for (std::int32_t i = 0; i < count; ++i) checkGrid(in, readRecord(), size, true);
-        return;
+        for (std::int32_t i = 0; i < count; ++i) {
+            result.grids.push_back(checkGrid(in, readRecord(), size, true));
+        }
+        return result;
     }
     std::vector<GridRecord> grids;
     for (std::int32_t i = 0; i < count; ++i) {
@@ -613,8 +632,9 @@ void validateLayout(const std::string& path)
     }
     for (const GridRecord& d : grids) {
         in.seek(std::uint64_t(d.grid));
-        checkGrid(in, d, std::uint64_t(d.block), false);
+        result.grids.push_back(checkGrid(in, d, std::uint64_t(d.block), false));
     }
+    return result;
 }
 
 } // namespace ivdb::io

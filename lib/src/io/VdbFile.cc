@@ -1,61 +1,15 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/io/VdbFile.h>
 
-#include "Layout.h"
-
 #include <ivdb/Version.h>
-#include <ivdb/io/AtomicFile.h>
 #include <ivdb/util/Params.h>
-#include <ivdb/util/System.h>
 
-#include <openvdb/io/Archive.h>
-#include <openvdb/io/File.h>
-
-#include <cerrno>
-#include <cstring>
 #include <filesystem>
 #include <string>
-
-#include <unistd.h>
 
 namespace ivdb::io {
 
 namespace fs = std::filesystem;
-
-namespace {
-
-[[noreturn]] void ioError(const std::string& path, const std::string& what)
-{
-    OPENVDB_THROW(openvdb::IoError, path + ": " + what);
-}
-
-} // namespace
-
-openvdb::GridPtrVec readVdb(const std::string& path)
-{
-    std::error_code ec;
-    if (!fs::exists(path, ec)) ioError(path, "no such file");
-    if (fs::is_directory(path, ec)) ioError(path, "is a folder, not a .vdb file");
-    if (::access(path.c_str(), R_OK) != 0) {
-        ioError(path, std::string("cannot read: ") + std::strerror(errno));
-    }
-    if (!fs::is_regular_file(path, ec)) ioError(path, "is not a regular file");
-    validateLayout(path);
-    openvdb::GridPtrVecPtr grids;
-    try {
-        // Delayed loading: topology now, voxel buffers when first touched, so the (single-
-        // threaded) decompression happens inside the parallel operations that read them. The
-        // layout was checked above, so every grid's bytes are in the file.
-        openvdb::io::File file(path);
-        file.open(/*delayLoad=*/true);
-        grids = file.getGrids();
-        file.close();
-    } catch (const std::exception& e) {
-        ioError(path, "not a readable .vdb file: " + util::errorText(e));
-    }
-    if (!grids || grids->empty()) ioError(path, "holds no grids");
-    return *grids;
-}
 
 openvdb::GridBase::Ptr selectGrid(const openvdb::GridPtrVec& grids, const std::string& path,
                                   const std::string& name)

@@ -63,8 +63,13 @@ void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
               const openvdb::MetaMap& fileMetadata = openvdb::MetaMap(),
               const WriteOptions& options = WriteOptions());
 
-/// @brief Read every grid of a .vdb file: topology and metadata now, voxel values on first
-/// access (OpenVDB's delayed loading), after checking the file's layout.
+/// @brief Read every grid of a .vdb file, whole, after checking the file's layout: the file is
+/// mapped into memory and the leaves' voxel data decompressed on all threads (TBB), each leaf
+/// by OpenVDB's own LeafNode::readBuffers, so the values are those OpenVDB's reader gives.
+/// Grids of types whose leaves the layout check does not locate (bool, mask, points) are read
+/// by OpenVDB's io::File with delayed loading.
+/// @return the grids in the order io::File::getGrids() gives them (by name, then file order);
+/// grids that share a tree in the file share it in memory
 /// @throw openvdb::IoError naming the path if it is missing, a folder, not a .vdb file,
 /// truncated or corrupt
 openvdb::GridPtrVec readVdb(const std::string& path);

@@ -1,0 +1,231 @@
+// SPDX-License-Identifier: Apache-2.0
+// The parallel .vdb reader: the file is mapped, its layout checked (which also finds where each
+// leaf's voxel data starts), the grids' metadata, transforms and topology read by OpenVDB's own
+// functions, and then every leaf's values by OpenVDB's LeafNode::readBuffers, on all threads,
+// each task through its own stream over the mapped bytes.
+//
+// Why not OpenVDB's delayed loading: io::File copies files under 500 MB to a temporary file
+// first, and then reads each leaf when first touched, through a lock and a new stream per leaf;
+// every ivdb command touches every voxel (the value check alone does), so the whole grid is
+// read anyway, and reading it here in one parallel pass is faster (docs/performance.md).
+#include <ivdb/io/VdbFile.h>
+
+#include "FileMapping.h"
+#include "Layout.h"
+
+#include <ivdb/util/System.h>
+
+#include <openvdb/io/Compression.h>
+#include <openvdb/io/File.h>
+#include <openvdb/io/io.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <string>
+
+#include <unistd.h>
+
+namespace ivdb::io {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+[[noreturn]] void ioError(const std::string& path, const std::string& what)
+{
+    OPENVDB_THROW(openvdb::IoError, path + ": " + what);
+}
+
+/// The grid types whose leaves the layout check locates (GridLayout::leaves).
+using WalkedGrids = openvdb::TypeList<openvdb::FloatGrid, openvdb::DoubleGrid, openvdb::Int32Grid,
+                                      openvdb::Int64Grid, openvdb::Vec3IGrid, openvdb::Vec3SGrid,
+                                      openvdb::Vec3DGrid>;
+
+/// What every stream reading a grid's bytes must be tagged with.
+struct StreamState
+{
+    openvdb::VersionId library;
+    std::uint32_t fileVersion = 0, compression = 0;
+
+    void tag(std::istream& is) const
+    {
+        openvdb::io::setVersion(is, library, fileVersion);
+        openvdb::io::setDataCompression(is, compression);
+    }
+};
+
+/// Every leaf's voxel data, in parallel: each task reads a run of consecutive leaves through
+/// its own stream, so no state is shared but the (read-only) mapping.
+template<typename GridT>
+void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
+                const StreamState& state)
+{
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    std::vector<LeafT*> leaves;
+    leaves.reserve(layout.leaves.size());
+    grid.tree().getNodes(leaves);
+    if (leaves.size() != layout.leaves.size()) {
+        OPENVDB_THROW(openvdb::IoError, "grid '" + grid.getName() + "' has " +
+                      std::to_string(leaves.size()) + " leaves where its voxel data has " +
+                      std::to_string(layout.leaves.size()));
+    }
+    const bool half = grid.saveFloatAsHalf();
+    const void* background = &grid.tree().background();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        MemoryStream is(file.data(), file.size());
+        state.tag(is);
+        openvdb::io::setGridBackgroundValuePtr(is, background);
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            is.seekg(std::streamoff(layout.leaves[i]));
+            leaves[i]->readBuffers(is, half);
+            if (!is) {
+                OPENVDB_THROW(openvdb::IoError, "grid '" + grid.getName() + "' ends inside the "
+                              "voxel data of a leaf");
+            }
+        }
+    });
+}
+
+/// One grid from its record on, as OpenVDB's Archive reads it (compression flags, metadata
+/// without the delayed-load table, transform, topology), then its voxel data in parallel.
+openvdb::GridBase::Ptr readGridParallel(const GridLayout& layout, const FileMapping& file,
+                                        StreamState state)
+{
+    std::string type = layout.type;
+    const std::string halfSuffix = "_HalfFloat";
+    const bool half = type.size() > halfSuffix.size() &&
+                      type.compare(type.size() - halfSuffix.size(), halfSuffix.size(), halfSuffix) == 0;
+    if (half) type.resize(type.size() - halfSuffix.size());
+    if (!openvdb::GridBase::isRegistered(type)) {
+        OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' has type '" + type +
+                      "', which this OpenVDB build does not know");
+    }
+    openvdb::GridBase::Ptr grid = openvdb::GridBase::createGrid(type);
+    grid->setSaveFloatAsHalf(half);
+
+    MemoryStream is(file.data(), file.size());
+    is.seekg(std::streamoff(layout.start));
+    is.read(reinterpret_cast<char*>(&state.compression), sizeof(state.compression));
+    state.tag(is);
+    grid->readMeta(is);
+    // Only OpenVDB's delayed loading uses the table; a grid read from a file never keeps it.
+    if ((*grid)[openvdb::GridBase::META_FILE_DELAYED_LOAD]) {
+        grid->removeMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD);
+    }
+    grid->readTransform(is);
+    if (layout.parent.empty()) {
+        grid->readTopology(is);
+        if (!is) OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' is truncated");
+        const bool known = grid->apply<WalkedGrids>([&](auto& g) {
+            readLeaves(g, layout, file, state);
+        });
+        if (!known) {
+            OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' has type '" +
+                          type + "', which the parallel reader does not read");
+        }
+    }
+    if (!is) OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' is truncated");
+    return grid;
+}
+
+/// Whether every grid's voxel data was located by the layout check.
+bool readableInParallel(const FileLayout& layout)
+{
+    for (const GridLayout& g : layout.grids) {
+        if (g.parent.empty() && !g.leavesWalked) return false;
+    }
+    return true;
+}
+
+/// The grids in the order OpenVDB's io::File::getGrids() gives them (from a file with grid
+/// offsets sorted by name, then in file order; from a stream in file order), so that "the first
+/// level set" means what it means to OpenVDB's own tools.
+void sortAsOpenVdb(std::vector<std::pair<std::string, openvdb::GridBase::Ptr>>& grids,
+                   const FileLayout& layout)
+{
+    if (!layout.hasGridOffsets) return;
+    std::stable_sort(grids.begin(), grids.end(), [](const auto& a, const auto& b) {
+        return a.first < b.first;
+    });
+}
+
+openvdb::GridPtrVec readParallel(const std::string& path, const FileMapping& file,
+                                 const FileLayout& layout)
+{
+    StreamState state;
+    state.library = openvdb::VersionId(layout.libraryMajor, layout.libraryMinor);
+    state.fileVersion = layout.fileVersion;
+    std::map<std::string, openvdb::GridBase::Ptr> byUniqueName;
+    std::vector<std::pair<std::string, openvdb::GridBase::Ptr>> grids;
+    try {
+        for (const GridLayout& g : layout.grids) {
+            openvdb::GridBase::Ptr grid = readGridParallel(g, file, state);
+            byUniqueName[g.uniqueName] = grid;
+            grids.emplace_back(openvdb::io::GridDescriptor::stripSuffix(g.uniqueName), grid);
+        }
+    } catch (const std::exception& e) {
+        ioError(path, "not a readable .vdb file: " + util::errorText(e));
+    }
+    // Grids that share a tree (instances) take their parent's.
+    for (const GridLayout& g : layout.grids) {
+        if (g.parent.empty()) continue;
+        const auto parent = byUniqueName.find(g.parent);
+        if (parent == byUniqueName.end()) {
+            ioError(path, "not a valid .vdb file: grid '" + g.uniqueName + "' shares the tree "
+                    "of a grid the file does not hold");
+        }
+        byUniqueName[g.uniqueName]->setTree(parent->second->baseTreePtr());
+    }
+    sortAsOpenVdb(grids, layout);
+    openvdb::GridPtrVec result;
+    for (auto& g : grids) result.push_back(g.second);
+    return result;
+}
+
+/// OpenVDB's own reader, with delayed loading: for the grid types the layout check does not
+/// walk to the leaves (bool, mask and point grids, and trees of other shapes).
+openvdb::GridPtrVec readWithOpenVdb(const std::string& path)
+{
+    openvdb::GridPtrVecPtr grids;
+    try {
+        openvdb::io::File file(path);
+        file.open(/*delayLoad=*/true);
+        grids = file.getGrids();
+        file.close();
+    } catch (const std::exception& e) {
+        ioError(path, "not a readable .vdb file: " + util::errorText(e));
+    }
+    return grids ? *grids : openvdb::GridPtrVec();
+}
+
+} // namespace
+
+openvdb::GridPtrVec readVdb(const std::string& path)
+{
+    std::error_code ec;
+    if (!fs::exists(path, ec)) ioError(path, "no such file");
+    if (fs::is_directory(path, ec)) ioError(path, "is a folder, not a .vdb file");
+    if (::access(path.c_str(), R_OK) != 0) {
+        ioError(path, std::string("cannot read: ") + std::strerror(errno));
+    }
+    if (!fs::is_regular_file(path, ec)) ioError(path, "is not a regular file");
+    openvdb::GridPtrVec grids;
+    {
+        const FileMapping file(path);
+        const FileLayout layout = validateLayout(path, file);
+        // The layout was checked, so every byte either reader reads is in the file.
+        if (readableInParallel(layout)) grids = readParallel(path, file, layout);
+    }
+    if (grids.empty()) grids = readWithOpenVdb(path);
+    if (grids.empty()) ioError(path, "holds no grids");
+    return grids;
+}
+
+} // namespace ivdb::io
