@@ -123,6 +123,50 @@ def makeIvdbOutputs(folder):
         make("curvature_" + method, ["curvature"], "curvature", s, "--method", method)
     make("curvature_principal", ["k1", "k2"], "curvature", s, "--method", "principal")
     make("curvature_with_input", ["curvature", "surface"], "curvature", s, "--with-input")
+    # The output options (issue 15): each compression, half floats, on level sets, fog volumes
+    # and vector grids; and `ivdb convert` re-saving files of several grids.
+    make("rasterize_zip", ["surface"], "rasterize", sphereScene, "--voxel-size", v,
+         "--compression", "zip")
+    make("rasterize_none", ["surface"], "rasterize", sphereScene, "--voxel-size", v,
+         "--compression", "none")
+    make("rasterize_half", ["surface"], "rasterize", sphereScene, "--voxel-size", v, "--half")
+    make("gradient_half", ["gradient"], "gradient", s, "--half")
+    make("gradient_zip", ["gradient", "gradient_magnitude"], "gradient", s, "--magnitude",
+         "--compression", "zip")
+    make("csg_union_fog_half", ["density", "surface"], "csg", "union", a, b, "--fog", "--half")
+    make("convert_none", ["gradient", "gradient_magnitude", "surface"], "convert",
+         out["gradient_all"][0], "--compression", "none")
+    make("convert_zip_half", ["density", "surface"], "convert", out["csg_union_fog"][0],
+         "--compression", "zip", "--half")
+    return out
+
+
+# What each output-option kind re-saves, and how close its values must be (half floats: within
+# 2^-11 of the value, relative, plus the smallest normal half's spacing near zero).
+VARIANTS = {
+    "rasterize_zip": ("rasterize", False), "rasterize_none": ("rasterize", False),
+    "rasterize_half": ("rasterize", True), "gradient_half": ("gradient", True),
+    "gradient_zip": ("gradient_all", False), "csg_union_fog_half": ("csg_union_fog", True),
+    "convert_none": ("gradient_all", False), "convert_zip_half": ("csg_union_fog", True),
+}
+
+
+def makeEmptyGridFile(folder):
+    """A file with an empty float grid beside a small level set, made by pyopenvdb, re-saved by
+    `ivdb convert` with each compression and with half floats. Returns {kind: path}."""
+    vdb = importPyopenvdb()
+    empty = vdb.FloatGrid(0.5)
+    empty.name = "empty"
+    ball = vdb.createLevelSetSphere(radius=0.5, center=(0, 0, 0), voxelSize=0.1, halfWidth=3)
+    ball.name = "ball"
+    source = os.path.join(folder, "empty_source.vdb")
+    vdb.write(source, grids=[empty, ball])
+    out = {}
+    for kind, args in (("empty_blosc", []), ("empty_zip", ["--compression", "zip"]),
+                       ("empty_none", ["--compression", "none"]), ("empty_half", ["--half"])):
+        path = os.path.join(folder, kind + ".vdb")
+        ivdb("convert", source, "-o", path, "-q", *args)
+        out[kind] = path
     return out
 
 

@@ -54,8 +54,9 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
             cls.shapes[name] = (path, volume, scene["voxel_size"])
         fog = cls.outputs["rasterize_fog"][0]
         info = ic.ivdbInfo(fog)["grids"][0]["world_bbox"]
+        cls.empties = ic.makeEmptyGridFile(cls.tmp)
         job = {
-            "imports": [path for path, _ in cls.outputs.values()],
+            "imports": [path for path, _ in cls.outputs.values()] + list(cls.empties.values()),
             "meshes": [{"file": path, "grid": "surface", "threshold": 0.0}
                        for path, _, _ in cls.shapes.values()],
             "render": {"file": fog, "grid": "density", "size": 64, "samples": 4,
@@ -94,6 +95,18 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
                         for j in range(4):
                             expected = (dx if i < 3 else 1.0) if i == j else 0.0
                             self.assertAlmostEqual(m[i][j], expected, places=6)
+
+    def testFilesWithAnEmptyGridOpen(self):
+        """An empty grid beside a level set, re-saved by `ivdb convert` with each compression
+        and half floats: Blender opens the file with both grids."""
+        imports = {r["file"]: r for r in self.result["imports"]}
+        for kind, path in self.empties.items():
+            with self.subTest(kind=kind):
+                r = imports[path]
+                self.assertEqual(r["object_type"], "VOLUME")
+                self.assertEqual(r["error_message"], "")
+                self.assertEqual(sorted(g["name"] for g in r["grids"]), ["ball", "empty"])
+                self.assertTrue(all(g["is_loaded"] for g in r["grids"]))
 
     def testVolumeToMeshEnclosesTheAnalyticVolume(self):
         meshes = {r["file"]: r for r in self.result["meshes"]}

@@ -98,6 +98,16 @@ class VdbToolInterop(ic.TempDirTestCase):
                 self.assertEqual(re.findall(r"^Name: (\S+)$", out, re.M), names)
                 self.assertIn("creator: ivdb", out)
 
+    def testVdbPrintListsEmptyGridsIvdbResaves(self):
+        """`ivdb convert` keeps an empty grid with each compression and half floats."""
+        for kind, path in ic.makeEmptyGridFile(self.tmp).items():
+            with self.subTest(kind=kind):
+                out = ic.run([self.vdbPrint, "-l", "-m", path]).stdout
+                self.assertEqual(re.findall(r"^Name: (\S+)$", out, re.M), ["ball", "empty"])
+                empty = out[out.index("Name: empty"):]
+                self.assertIn("Tree is empty!", empty)
+                self.assertIn("Background value: 0.5", empty)
+
     def testVdbToolMeshesEveryIvdbLevelSet(self):
         """`vdb_tool -read OUT.vdb -ls2mesh -write x.obj` on every output holding a level set,
         with the enclosed volume within 1% of the analytic one (3% with sharp edges)."""

@@ -5,6 +5,7 @@
 // option, and leaving no file behind.
 #include <ivdb/jobs/Bench.h>
 #include <ivdb/jobs/Combine.h>
+#include <ivdb/jobs/Convert.h>
 #include <ivdb/jobs/Differentiate.h>
 #include <ivdb/jobs/Info.h>
 #include <ivdb/jobs/Inputs.h>
@@ -311,6 +312,41 @@ TEST_F(TestJobs, GradientAndCurvatureAreTheOperators)
     EXPECT_LT(r.steps[0].second.interior.angleDeg.p95, 1.0);
     cmp.steps = {0};
     expectParamError([&] { jobs::compareGradient(cmp); }, "step", keep);
+}
+
+TEST_F(TestJobs, ConvertKeepsTheGridsAndChecksTheFormat)
+{
+    rasterize("sphere.json", "s.vdb");
+    const auto phi = jobs::readLevelSet(path("s.vdb"));
+    jobs::ConvertOptions c;
+    c.input = path("s.vdb");
+    c.output = path("z.vdb");
+    c.compression = io::Compression::None;
+    const jobs::ConvertResult r = jobs::convert(c);
+    EXPECT_EQ(r.format, jobs::FileFormat::Vdb);
+    ASSERT_EQ(r.grids.size(), 1u);
+    const auto back = readBack(path("z.vdb"));
+    ASSERT_EQ(back.size(), 1u);
+    expectSameGrid(*phi, *openvdb::gridPtrCast<openvdb::FloatGrid>(back[0]));
+    EXPECT_GT(r.fileBytes, 0u);
+    c.output = path("s.nvdb");
+    c.compression.reset();
+    EXPECT_EQ(jobs::convert(c).format, jobs::FileFormat::NanoVdb);
+    EXPECT_GT(fs::file_size(path("s.nvdb")), 0u);
+
+    const std::vector<std::string> keep{"s.vdb", "z.vdb", "s.nvdb"};
+    jobs::ConvertOptions bad = c;
+    bad.output = path("s.png");
+    expectParamError([&] { jobs::convert(bad); }, "output", keep);
+    bad.output = path("t.nvdb");
+    bad.half = true;
+    expectParamError([&] { jobs::convert(bad); }, "half", keep);
+    bad.half = false;
+    bad.compression = io::Compression::Zip;
+    expectParamError([&] { jobs::convert(bad); }, "compression", keep);
+    bad.compression.reset();
+    bad.grid = "nope";
+    expectParamError([&] { jobs::convert(bad); }, "grid", keep);
 }
 
 TEST_F(TestJobs, VisualizeJobsCheckTheirParameters)

@@ -205,6 +205,7 @@ int run(int argc, char** argv)
         addMesh(app, action);
         addGlyphs(app, action);
         addRender(app, action);
+        addConvert(app, action);
         addBench(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {

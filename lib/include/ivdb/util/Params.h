@@ -95,6 +95,8 @@ inline constexpr Param kFov{"fov", "camera field of view"};
 inline constexpr Param kReps{"reps", "repetitions"};
 inline constexpr Param kResolutions{"resolutions", "resolution"};
 inline constexpr Param kMethod{"method", "method"};
+inline constexpr Param kCompression{"compression", "compression"};
+inline constexpr Param kHalf{"half", "half floats"};
 } // namespace param
 
 namespace limits {
