@@ -22,7 +22,14 @@ Section "distances" (true distances of shapes that are not exact SDFs, docs/meth
     spheres and a union of 1000 spheres, each CSG scene in both distance modes, per active voxel
     against the exact sphere; OpenVDB's route (createLevelSetSphere per sphere + csgUnion) for the
     unions, measured by `ivdb bench-run` in the same run.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|all]
+Section "io" (.vdb reading and writing, issue 15):
+  * write and full read of the radius-400 sphere: ivdb's parallel writer and reader (1 and 2
+    threads) vs io::File::write and io::File's full load (Google Benchmark, same run);
+  * end to end against vdb_tool, as ratios of wall times (ivdb / vdb_tool; lower is better):
+    rasterize, gradient, curvature and csg union at radius 400 and rasterize at radius 1600,
+    ivdb with --threads 1 and 2, interleaved;
+  * rasterize's compute at radius 1600 against 16x its compute at radius 400.
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|all]
 [--reps N] [--quick]
 """
 import argparse
@@ -78,7 +85,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
-    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "all"], default="all")
+    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "all"],
+                    default="all")
     args = ap.parse_args()
     reps = 3 if args.quick else args.reps
     big = 200 if args.quick else 400
@@ -93,6 +101,8 @@ def main():
             bench_core(tmp, big, reps, args.quick)
         if args.section in ("distances", "all"):
             bench_distances(tmp, reps, args.quick)
+        if args.section in ("io", "all"):
+            bench_io(tmp, big, reps, args.quick)
 
 
 def gbench_medians(pattern, reps):
@@ -296,6 +306,83 @@ def bench_distances(tmp, reps, quick):
         ovdb = f"{openvdb(path, dx):.3f} s" if route else "-"
         print(f"| {name} | {active / 1e6:.2f} M | {t:.3f} s | {t / active / base:.1f}x | {peak} ({grid}) "
               f"| {ovdb} |")
+    print()
+
+
+def bench_io(tmp, big, reps, quick):
+    med = gbench_medians_full("(WriteVdb|FileWrite|ReadVdb|FileRead)", reps)
+    g = lambda name: med[f"{name}/real_time"]
+    print(f"| .vdb I/O, sphere radius {big} voxels (Google Benchmark) | time | vs OpenVDB |")
+    print("|---|---|---|")
+    ref = g(f"BM_OpenVDB_FileWrite/{big}")
+    print(f"| io::File::write (Blosc) | {ref:.0f} ms | |")
+    for t in (1, 2):
+        ours = g(f"BM_WriteVdb/{big}/{t}")
+        print(f"| ivdb writer, {t} thread{'s' if t > 1 else ''} | {ours:.0f} ms | **{ref / ours:.2f}x faster** |")
+    ref = g(f"BM_OpenVDB_FileRead/{big}")
+    delayed = g(f"BM_OpenVDB_FileReadDelayed/{big}")
+    print(f"| io::File full load | {ref:.0f} ms | |")
+    print(f"| io::File delayed load, then every leaf touched on all threads | {delayed:.0f} ms | |")
+    for t in (1, 2):
+        ours = g(f"BM_ReadVdb/{big}/{t}")
+        print(f"| ivdb reader (layout check included), {t} thread{'s' if t > 1 else ''} | {ours:.0f} ms "
+              f"| **{ref / ours:.2f}x faster** (delayed: {delayed / ours:.2f}x) |")
+    print()
+
+    # End to end against vdb_tool.
+    src = os.path.join(tmp, "io_in.vdb")
+    run([IVDB, "rasterize", sphere_scene(tmp, big), "-o", src, "-q"])
+    a, b = os.path.join(tmp, "io_a.vdb"), os.path.join(tmp, "io_b.vdb")
+    for path, cx in ((a, -0.35), (b, 0.35)):
+        scene = os.path.join(tmp, "io_s.json")
+        with open(scene, "w") as f:
+            json.dump({"voxel_size": 1.0 / big, "shape": {"type": "sphere", "center": [cx, 0, 0],
+                                                          "radius": 1}}, f)
+        run([IVDB, "rasterize", scene, "-o", path, "-q"])
+    out, ref = os.path.join(tmp, "io_out.vdb"), os.path.join(tmp, "io_ref.vdb")
+    ops = [
+        (f"rasterize, radius {big}", ["rasterize", sphere_scene(tmp, big)],
+         ["-sphere", f"voxel={1.0 / big}", "radius=1"]),
+        ("gradient", ["gradient", src], ["-read", src, "-grad"]),
+        ("curvature", ["curvature", src], ["-read", src, "-curvature"]),
+        ("csg union of two spheres", ["csg", "union", a, b], ["-read", a, b, "-union"]),
+    ]
+    if not quick:
+        ops.append(("rasterize, radius 1600", ["rasterize", sphere_scene(tmp, 1600)],
+                    ["-sphere", "voxel=0.000625", "radius=1"]))
+    print("| end to end (read, compute, write) | vdb_tool | ivdb, 1 thread | ivdb, 2 threads "
+          "| ratio ivdb / vdb_tool (2 threads) |")
+    print("|---|---|---|---|---|")
+    for name, ours, theirs in ops:
+        n = reps if "1600" not in name else min(reps, 3)
+        t, _ = median_runs({
+            "tool": ["vdb_tool", *theirs, "-write", ref],
+            "1": [IVDB, "--threads", "1", *ours, "-o", out, "-q"],
+            "2": [IVDB, *ours, "-o", out, "-q"],
+        }, n)
+        print(f"| {name} | {t['tool']:.2f} s | {t['1']:.2f} s | {t['2']:.2f} s "
+              f"| **{t['2'] / t['tool']:.2f}** |")
+    print()
+
+    if quick:
+        return
+    # Compute scaling with the active voxels: radius 1600 has 16.0x the voxels of radius 400.
+    def compute(r):
+        res = subprocess.run([IVDB, "rasterize", sphere_scene(tmp, r), "-o", out], check=True,
+                             capture_output=True, text=True).stdout
+        words = res.split()
+        return int(words[1]), float(words[words.index("compute") + 1])
+    times = {400: [], 1600: []}
+    voxels = {}
+    for _ in range(min(reps, 3)):
+        for r in (400, 1600):
+            voxels[r], seconds = compute(r)
+            times[r].append(seconds)
+    c4, c16 = statistics.median(times[400]), statistics.median(times[1600])
+    v = voxels[1600] / voxels[400]
+    print("| rasterize compute | radius 400 | radius 1600 | voxels ratio | time ratio | vs linear |")
+    print("|---|---|---|---|---|---|")
+    print(f"| sphere | {c4:.3f} s | {c16:.3f} s | {v:.1f}x | {c16 / c4:.1f}x | **{c16 / c4 / v:.2f}x** |")
     print()
 
 

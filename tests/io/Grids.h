@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <string>
+#include <type_traits>
 
 namespace ivdb::test {
 
@@ -21,12 +22,19 @@ inline openvdb::FloatGrid::Ptr sphere(float radius, float dx, const std::string&
     return g;
 }
 
-/// Float leaves with every mask-compression case: inactive values that are one other value,
-/// two others, the background and another, three or more, and NaN (never equal to itself).
-inline openvdb::FloatGrid::Ptr assortedLeaves()
+/// Leaves with every mask-compression case: inactive values that are one other value, two
+/// others, the background and another, three or more, and NaNs (never equal to themselves);
+/// float values, or vec3s values built from them (a NaN in one component).
+template<typename GridT>
+typename GridT::Ptr assortedLeaves(const std::string& name)
 {
-    auto assorted = openvdb::FloatGrid::create(0.5f);
-    assorted->setName("assorted");
+    using ValueT = typename GridT::ValueType;
+    const auto value = [](float f) {
+        if constexpr (std::is_same_v<ValueT, float>) return f;
+        else return ValueT(1.0f, f, -f); // NaN only in the last two components
+    };
+    auto assorted = GridT::create(value(0.5f));
+    assorted->setName(name);
     auto acc = assorted->getAccessor();
     const float inactive[][3] = {{2.0f, 2.0f, 2.0f}, {2.0f, 3.0f, 2.0f}, {0.5f, 3.0f, 0.5f},
                                  {1.0f, 2.0f, 3.0f}, {-0.5f, 0.5f, -0.5f},
@@ -34,16 +42,25 @@ inline openvdb::FloatGrid::Ptr assortedLeaves()
     for (int leaf = 0; leaf < 7; ++leaf) {
         for (int k = 0; k < 512; ++k) {
             const openvdb::Coord c(leaf * 8 + (k >> 6), (k >> 3) & 7, k & 7);
-            if (k % 3 == 0) acc.setValueOn(c, float(k) * 0.25f);
-            else acc.setValueOff(c, inactive[leaf][k % 3 == 1 ? 0 : (k % 2 ? 1 : 2)]);
+            if (k % 3 == 0) acc.setValueOn(c, value(float(k) * 0.25f));
+            else acc.setValueOff(c, value(inactive[leaf][k % 3 == 1 ? 0 : (k % 2 ? 1 : 2)]));
+        }
+    }
+    // One NaN among inactive values that are otherwise all one value: after it (k = 100) and
+    // first (k = 1). OpenVDB counts a NaN as a value of its own each time.
+    for (int leaf = 7; leaf < 9; ++leaf) {
+        for (int k = 0; k < 512; ++k) {
+            const openvdb::Coord c(leaf * 8 + (k >> 6), (k >> 3) & 7, k & 7);
+            if (k % 3 == 0) acc.setValueOn(c, value(float(k)));
+            else acc.setValueOff(c, value(k == (leaf == 7 ? 100 : 1) ? std::nanf("") : 1.0f));
         }
     }
     return assorted;
 }
 
 /// A level set, its gradient (vec3s), a fog volume, double, int32, int64 and vec3d grids with
-/// tiles, an empty grid, assorted inactive values, a grid sharing the first one's tree and two
-/// grids of the same name; with @a bools also a bool grid (a type whose leaves store no
+/// tiles, an empty grid, a grid sharing the first one's tree, two grids of the same name and
+/// assorted inactive values (float and vec3s); with @a bools also a bool grid (a type whose leaves store no
 /// compressed values).
 inline openvdb::GridCPtrVec everyKindOfGrid(bool bools)
 {
@@ -72,7 +89,8 @@ inline openvdb::GridCPtrVec everyKindOfGrid(bool bools)
     twin->setName("twin");
     auto dup1 = sphere(0.3f, 0.05f, "dup"), dup2 = sphere(0.4f, 0.05f, "dup");
     openvdb::GridCPtrVec all{s, gradient, density, doubles, ints, longs, vectors, empty,
-                             assortedLeaves(), twin, dup1, dup2};
+                             assortedLeaves<openvdb::FloatGrid>("assorted"), twin, dup1, dup2,
+                             assortedLeaves<openvdb::Vec3SGrid>("assorted_vectors")};
     if (bools) {
         auto b = openvdb::BoolGrid::create(false);
         b->setName("bools");

@@ -19,15 +19,23 @@
 #include <openvdb/io/GridDescriptor.h>
 #include <openvdb/tree/LeafManager.h>
 
+#include <blosc.h>
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <map>
 #include <set>
 #include <sstream>
 #include <type_traits>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace ivdb::io {
 
@@ -106,6 +114,50 @@ struct LeafChunk
     std::vector<std::int64_t> sizes;  // the value block's bytes (with its int64 prefix) per leaf
 };
 
+/// Bit k set where @a v[k] (k < 64) equals neither @a a nor @a b (NaN equals nothing): SSE2
+/// compares of four floats at a time where available, which the compiler does not find itself.
+inline openvdb::Index64 notEqualBits(const float* v, float a, float b)
+{
+    openvdb::Index64 bits = 0;
+#if defined(__SSE2__)
+    const __m128 va = _mm_set1_ps(a), vb = _mm_set1_ps(b);
+    for (int k = 0; k < 64; k += 4) {
+        const __m128 x = _mm_loadu_ps(v + k);
+        const __m128 neither = _mm_and_ps(_mm_cmpneq_ps(x, va), _mm_cmpneq_ps(x, vb));
+        bits |= openvdb::Index64(_mm_movemask_ps(neither)) << k;
+    }
+#else
+    for (int k = 0; k < 64; ++k) bits |= openvdb::Index64(!(v[k] == a) & !(v[k] == b)) << k;
+#endif
+    return bits;
+}
+
+/// The same for vec3s values: a voxel is set where its vector differs from both @a a and @a b
+/// in some component (branch-free; vectors compare exactly, component by component).
+inline openvdb::Index64 notEqualBits(const openvdb::Vec3s* v, const openvdb::Vec3s& a,
+                                     const openvdb::Vec3s& b)
+{
+    openvdb::Index64 bits = 0;
+    for (int k = 0; k < 64; ++k) {
+        const openvdb::Vec3s& x = v[k];
+        const bool notA = !(x[0] == a[0]) | !(x[1] == a[1]) | !(x[2] == a[2]);
+        const bool notB = !(x[0] == b[0]) | !(x[1] == b[1]) | !(x[2] == b[2]);
+        bits |= openvdb::Index64(notA & notB) << k;
+    }
+    return bits;
+}
+
+inline bool hasNaN(float v) { return std::isnan(v); }
+inline bool hasNaN(const openvdb::Vec3s& v)
+{
+    return std::isnan(v[0]) || std::isnan(v[1]) || std::isnan(v[2]);
+}
+
+/// The value types whose inactive values are counted a word of 64 voxels at a time.
+template<typename ValueT>
+inline constexpr bool kWordCompare = std::is_same_v<ValueT, float> ||
+                                     std::is_same_v<ValueT, openvdb::Vec3s>;
+
 /// Writes one grid of type GridT (one of the seven types with delayed-load tables).
 template<typename GridT>
 class GridWriter
@@ -135,9 +187,32 @@ public:
         // Hold every leaf's compressed bytes if they fit (a bound: the uncompressed values),
         // else find the table's sizes first and compress again while streaming.
         const double bound = double(n) * double(LeafT::NodeMaskType::memUsage() + 1 + LeafT::SIZE * sizeof(ValueT) + 8);
-        std::vector<LeafChunk> chunks;
         const bool holdAll = bound <= double(mBufferLimit);
-        if (holdAll) chunks = compress(0, n);
+        // While the leaves are compressed, one task serializes the transform and topology and
+        // computes the statistics io::File adds (a shallow copy's metadata): serial work that
+        // would otherwise wait for the compression.
+        auto copy = openvdb::ConstPtrCast<GridBase>(mGrid.copyGrid());
+        std::string head;
+        tbb::task_group side;
+        side.run([&] {
+            StringSink sink(head);
+            std::ostream hs(&sink);
+            hs.copyfmt(os); // the stream state OpenVDB's writers read (compression, background)
+            openvdb::io::setDataCompression(hs, mGridFlags);
+            mGrid.writeTransform(hs);
+            mGrid.writeTopology(hs);
+            copy->addStatsMetadata();
+            copy->insertMeta("file_compression",
+                             openvdb::StringMetadata(openvdb::io::compressionToString(mGridFlags)));
+        });
+        std::vector<LeafChunk> chunks;
+        try {
+            if (holdAll) chunks = compress(0, n);
+        } catch (...) {
+            side.wait();
+            throw;
+        }
+        side.wait();
         openvdb::io::DelayedLoadMetadata table;
         if (n > 0) {
             table.resizeMask(n);
@@ -162,15 +237,9 @@ public:
         };
         openvdb::io::setDataCompression(os, mGridFlags);
         w(&mGridFlags, sizeof(mGridFlags));
-        // The metadata of a shallow copy, with the entries io::File adds.
-        auto copy = openvdb::ConstPtrCast<GridBase>(mGrid.copyGrid());
         copy->insertMeta("file_delayed_load", table);
-        copy->addStatsMetadata();
-        copy->insertMeta("file_compression",
-                         openvdb::StringMetadata(openvdb::io::compressionToString(mGridFlags)));
         copy->writeMeta(os);
-        mGrid.writeTransform(os);
-        mGrid.writeTopology(os);
+        w(head.data(), head.size());
         blockPos = std::int64_t(os.tellp());
         if (holdAll) {
             for (const auto& c : chunks) w(c.bytes.data(), c.bytes.size());
@@ -225,11 +294,12 @@ private:
         MaskInfo r;
         r.inactiveVal[0] = r.inactiveVal[1] = background;
         int unique = 0;
-        if constexpr (std::is_same_v<ValueT, float>) {
-            // Floats: find the first two distinct inactive values, then check with one
-            // branch-free pass (it vectorizes) that every inactive value is one of them.
+        if constexpr (kWordCompare<ValueT>) {
+            // Floats and vec3s: find the first two distinct inactive values and check that every
+            // inactive value is one of them, a word of 64 voxels at a time (branch-free).
             unique = twoInactiveValues(on, src, r.inactiveVal);
-            if (unique < 0) unique = 3;
+            if (unique == kMoreThanTwo) unique = 3;
+            if (unique == kNaN) unique = countInactiveValues(on, src, r.inactiveVal);
         } else {
             unique = countInactiveValues(on, src, r.inactiveVal);
         }
@@ -281,29 +351,42 @@ private:
         return unique;
     }
 
-    /// For float leaves: the number of distinct inactive values (0, 1 or 2) with the first two in
-    /// order in @a val, as countInactiveValues counts them, or -1 if there are more.
-    static int twoInactiveValues(const typename LeafT::NodeMaskType& on, const float* src, float* val)
+    /// twoInactiveValues() found three or more distinct inactive values, or a NaN among the
+    /// first two (each NaN counts as a value of its own; the per-voxel count decides then).
+    static constexpr int kMoreThanTwo = -1, kNaN = -2;
+
+    /// Bits of word @a w of @a src whose value is not @a a (NaN is never equal).
+    static openvdb::Index64 differing(const ValueT* src, openvdb::Index w, const ValueT& a)
+    {
+        return notEqualBits(src + w * 64, a, a);
+    }
+
+    /// For float and vec3s leaves: the number of distinct inactive values (0, 1 or 2) with the first two in
+    /// order in @a val, as countInactiveValues counts them; kMoreThanTwo if there are more; kNaN
+    /// if one of the first two is NaN.
+    static int twoInactiveValues(const typename LeafT::NodeMaskType& on, const ValueT* src, ValueT* val)
     {
         constexpr openvdb::Index kWords = LeafT::NodeMaskType::WORD_COUNT;
-        int found = 0;
-        for (openvdb::Index w = 0; w < kWords && found < 2; ++w) {
-            for (openvdb::Index64 bits = ~on.template getWord<openvdb::Index64>(w); bits && found < 2;
-                 bits &= bits - 1) {
-                const float v = src[w * 64 + openvdb::Index(openvdb::util::FindLowestOn(bits))];
-                if (found == 1 && v == val[0]) continue;
-                val[found++] = v;
-            }
+        const auto off = [&on](openvdb::Index w) { return ~on.template getWord<openvdb::Index64>(w); };
+        openvdb::Index w = 0;
+        while (w < kWords && !off(w)) ++w;
+        if (w == kWords) return 0; // every voxel is active
+        const ValueT a = src[w * 64 + openvdb::Index(openvdb::util::FindLowestOn(off(w)))];
+        if (hasNaN(a)) return kNaN;
+        val[0] = a;
+        // The first inactive voxel (after the first) that is not a.
+        for (; w < kWords; ++w) {
+            const openvdb::Index64 hits = differing(src, w, a) & off(w);
+            if (hits) break;
         }
-        if (found < 2) return found; // at most one distinct value (or none): the loop is done
-        const float a = val[0], b = val[1];
-        for (openvdb::Index w = 0; w < kWords; ++w) {
-            openvdb::Index64 other = 0;
-            for (int k = 0; k < 64; ++k) {
-                const float v = src[w * 64 + k];
-                other |= openvdb::Index64(!(v == a) & !(v == b)) << k;
-            }
-            if (other & ~on.template getWord<openvdb::Index64>(w)) return -1;
+        if (w == kWords) return 1;
+        const openvdb::Index64 first = differing(src, w, a) & off(w);
+        const ValueT b = src[w * 64 + openvdb::Index(openvdb::util::FindLowestOn(first))];
+        if (hasNaN(b)) return kNaN;
+        val[1] = b;
+        // Every inactive voxel from there on is a or b (before it, all were a).
+        for (; w < kWords; ++w) {
+            if (notEqualBits(src + w * 64, a, b) & off(w)) return kMoreThanTwo;
         }
         return 2;
     }
@@ -312,7 +395,7 @@ private:
     /// loops over the masks' words instead of per-voxel bit tests: the same bytes (the tests
     /// compare whole files with io::File's), in about half the time before the codec. Half
     /// values and the other compressions go through OpenVDB's own writeBuffers.
-    void writeLeaf(std::ostream& os, const LeafT& leaf) const
+    void writeLeaf(std::ostream& os, std::string& out, const LeafT& leaf) const
     {
         using MaskT = typename LeafT::NodeMaskType;
         namespace vio = openvdb::io;
@@ -330,7 +413,7 @@ private:
             }
         }
         if (code == vio::NO_MASK_AND_ALL_VALS) {
-            vio::writeData(os, src, LeafT::SIZE, mGridFlags);
+            writeValues(os, out, src, LeafT::SIZE);
             return;
         }
         ValueT active[LeafT::SIZE];
@@ -341,28 +424,58 @@ private:
         MaskT select;
         for (openvdb::Index w = 0; w < MaskT::WORD_COUNT; ++w) {
             const openvdb::Index64 word = on.template getWord<openvdb::Index64>(w);
-            for (openvdb::Index64 bits = word; bits; bits &= bits - 1) {
-                active[count++] = src[w * 64 + openvdb::Index(openvdb::util::FindLowestOn(bits))];
+            // Branch-free compaction: every value is stored, and the next store overwrites it
+            // unless its voxel is active (no chain of bit scans).
+            for (openvdb::Index k = 0; k < 64; ++k) {
+                active[count] = src[w * 64 + k];
+                count += openvdb::Index((word >> k) & 1);
             }
             if (!selection) continue;
             // The inactive voxels that hold the second inactive value.
             openvdb::Index64 pick = 0;
-            for (openvdb::Index64 bits = ~word; bits; bits &= bits - 1) {
-                const openvdb::Index b = openvdb::Index(openvdb::util::FindLowestOn(bits));
-                if (openvdb::math::isExactlyEqual(src[w * 64 + b], mc.inactiveVal[1])) {
-                    pick |= openvdb::Index64(1) << b;
+            if constexpr (kWordCompare<ValueT>) {
+                pick = ~notEqualBits(src + w * 64, mc.inactiveVal[1], mc.inactiveVal[1]) & ~word;
+            } else {
+                for (openvdb::Index64 bits = ~word; bits; bits &= bits - 1) {
+                    const openvdb::Index b = openvdb::Index(openvdb::util::FindLowestOn(bits));
+                    if (openvdb::math::isExactlyEqual(src[w * 64 + b], mc.inactiveVal[1])) {
+                        pick |= openvdb::Index64(1) << b;
+                    }
                 }
             }
             select.template getWord<openvdb::Index64>(w) = pick;
         }
         if (selection) select.save(os);
-        vio::writeData(os, active, count, mGridFlags);
+        writeValues(os, out, active, count);
+    }
+
+    /// io::writeData(os, values, count, flags): with Blosc, compressed straight into @a out (the
+    /// string @a os appends to), as io::bloscToStream compresses (level 9, byte shuffle of 4-byte
+    /// words, LZ4, one block, one thread), without its temporary buffer and copy.
+    void writeValues(std::ostream& os, std::string& out, const ValueT* values, openvdb::Index count) const
+    {
+        if (!(mGridFlags & openvdb::io::COMPRESS_BLOSC)) {
+            openvdb::io::writeData(os, values, count, mGridFlags);
+            return;
+        }
+        const std::size_t bytes = std::size_t(count) * sizeof(ValueT);
+        const std::size_t at = out.size();
+        out.resize(at + 8 + bytes + BLOSC_MAX_OVERHEAD);
+        const int stored = blosc_compress_ctx(9, BLOSC_SHUFFLE, sizeof(float), bytes, values,
+                                              &out[at + 8], bytes + BLOSC_MAX_OVERHEAD,
+                                              BLOSC_LZ4_COMPNAME, bytes, 1);
+        // Stored raw (minus its size first) when Blosc fails, as io::bloscToStream does.
+        const std::int64_t size = stored > 0 ? std::int64_t(stored) : -std::int64_t(bytes);
+        if (stored <= 0) std::memcpy(&out[at + 8], values, bytes);
+        std::memcpy(&out[at], &size, sizeof(size));
+        out.resize(at + 8 + (stored > 0 ? std::size_t(stored) : bytes));
     }
 
     LeafChunk compressChunk(std::size_t from, std::size_t to) const
     {
         LeafChunk out;
-        out.bytes.reserve((to - from) * (LeafT::SIZE * sizeof(ValueT) / 2));
+        // About twice what a level set's leaves take, so that a chunk rarely grows.
+        out.bytes.reserve((to - from) * (LeafT::SIZE * sizeof(ValueT) / 2) + LeafT::SIZE * sizeof(ValueT) + 256);
         StringSink sink(out.bytes);
         std::ostream os(&sink);
         openvdb::io::setDataCompression(os, mGridFlags);
@@ -373,7 +486,7 @@ private:
             if (mHalf || !(mGridFlags & openvdb::io::COMPRESS_ACTIVE_MASK)) {
                 leaf.writeBuffers(os, mHalf);
             } else {
-                writeLeaf(os, leaf);
+                writeLeaf(os, out.bytes, leaf);
             }
             ends.push_back(os.tellp());
             // The delayed-load entry's mask code, as Archive's PopulateDelayedLoadMetadataOp
