@@ -9,7 +9,7 @@ packages=(
   libcli11-dev nlohmann-json3-dev
   libgtest-dev libbenchmark-dev
   libopenvdb-tools python3-openvdb python3-numpy python3-matplotlib libpng-dev libopenexr-dev
-  libnanovdb-dev libnanovdb-tools
+  libnanovdb-dev libnanovdb-tools libassimp-dev
   blender
   clang libclang-rt-14-dev llvm
 )

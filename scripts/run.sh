@@ -6,7 +6,8 @@
 # grid blend, and the gradient and mean curvature of the difference of two spheres (data/fig1_difference);
 # meshes of that difference coloured by its mean curvature (HSV over [-50, 50]) and of the
 # blended union (data/fig5_blend_union), gradient arrows on a sphere, a Blender-ready --fog copy of the
-# blended union, and the gallery (docs/gallery.md): the figures rendered into out/*.png.
+# blended union, and the gallery (docs/gallery.md): the figures rendered into out/*.png (with
+# data/knot_smooth.json, a mesh smooth-unioned with implicit shapes).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -32,7 +33,7 @@ done
 "$ivdb" glyphs out/sphere_gradient.vdb -o out/fig3_sphere_arrows.ply --stride 8
 # The gallery: the gallery's figures as images (README, docs/ holds 320x240 copies).
 for f in fig1_union fig1_intersection fig1_difference fig2_plane fig2_cylinder fig2_ellipsoid \
-         fig2_cone fig2_paraboloid fig2_hyperboloid fig5_blend_union; do
+         fig2_cone fig2_paraboloid fig2_hyperboloid fig5_blend_union knot_smooth; do
   "$ivdb" render "out/$f.vdb" -o "out/$f.png" -q
 done
 "$ivdb" render out/sphere.vdb -o out/fig3_sphere_gradient.png --color-by out/sphere_gradient.vdb -q

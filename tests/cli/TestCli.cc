@@ -314,3 +314,28 @@ TEST_F(TestCli, InfoBadFiles)
 }
 
 } // namespace
+
+TEST_F(TestCli, MeshScenes)
+{
+    // The knot of data/ smooth-unioned with a sphere: written, and read back as a level set.
+    const auto ok = run({"rasterize", data("knot_smooth.json"), "-o", "knot.vdb", "--voxel-size", "0.02"});
+    ASSERT_EQ(ok.exitCode, 0) << ok.err;
+    expectMentions(ok.out, {"knot_smooth.json:", "active voxels"}, "knot");
+    EXPECT_TRUE(std::filesystem::exists(path("knot.vdb")));
+
+    // An open mesh: a note on stderr, and a level set all the same.
+    writeText("open.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\n");
+    writeText("open.json", R"({"voxel_size": 0.05, "shape": {"type": "mesh", "file": "open.obj"}})");
+    const auto opened = run({"rasterize", "open.json", "-o", "open.vdb"});
+    ASSERT_EQ(opened.exitCode, 0) << opened.err;
+    expectMentions(opened.err, {"ivdb: note: ", "open.obj: the mesh is not closed (3 edges"}, "open");
+
+    // A missing mesh: the JSON path and the file named, nothing written.
+    writeText("missing.json", R"({"voxel_size": 0.05, "shape": {"type": "union", "children": [
+        {"type": "sphere", "radius": 1}, {"type": "mesh", "file": "nosuch.obj"}]}})");
+    const auto before = listing();
+    const auto bad = run({"rasterize", "missing.json", "-o", "bad.vdb"});
+    expectError(bad, {"missing.json: shape.children[1].file: ", "nosuch.obj: cannot open the mesh file"},
+                "missing mesh");
+    EXPECT_EQ(listing(), before);
+}

@@ -151,6 +151,33 @@ TEST_F(TestCliOps, BlendWritesTheBlendedLevelSet)
     EXPECT_GT(blended, -0.02f) << blended;
 }
 
+TEST_F(TestCliOps, SmoothBlendWritesTheSmoothLevelSet)
+{
+    const Result r = run({"blend", "union", "a.vdb", "b.vdb", "-k", "0.05", "-o", "smooth.vdb"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("smooth union k=0.05 of 2 level sets"), std::string::npos) << r.out;
+    auto g = readSurface("smooth.vdb");
+    EXPECT_EQ(g->getGridClass(), openvdb::GRID_LEVEL_SET);
+    // Over the neck both spheres are 0.0103 away (|a - b| = 0, h = 1): the formula gives
+    // 0.0103 - k/4 = -0.0022, inside; the voxel holds the distance to that surface.
+    const float neck = g->tree().getValue(openvdb::Coord(0, 25, 0));
+    EXPECT_LT(neck, 0.0f) << neck;
+    EXPECT_GT(neck, -0.01f) << neck;
+    // Far from the crease (beyond k) the sharp union's values are kept.
+    ASSERT_EQ(run({"csg", "union", "a.vdb", "b.vdb", "-o", "sharp.vdb", "-q"}).exitCode, 0);
+    const openvdb::Coord far(-47, 0, 0);
+    EXPECT_EQ(g->tree().getValue(far), readSurface("sharp.vdb")->tree().getValue(far));
+    // -p and -k are one or the other: a usage error (exit 2) for both or neither.
+    for (const auto& args : std::vector<std::vector<std::string>>{
+             {"blend", "union", "a.vdb", "b.vdb", "-p", "10", "-k", "0.1", "-o", "x.vdb"},
+             {"blend", "union", "a.vdb", "b.vdb", "-o", "x.vdb"}}) {
+        const Result u = run(args);
+        EXPECT_EQ(u.exitCode, 2) << u.err;
+        EXPECT_NE(u.err.find("smooth"), std::string::npos) << u.err;
+        EXPECT_FALSE(fs::exists(path("x.vdb")));
+    }
+}
+
 TEST_F(TestCliOps, BadInputsAreRefused)
 {
     expectRefused({"csg", "union", "a.vdb", "fog.vdb"}, "fog volume");
@@ -161,6 +188,9 @@ TEST_F(TestCliOps, BadInputsAreRefused)
     expectRefused({"blend", "union", "a.vdb", "b.vdb", "-p", "0"}, "-p must be in [0.1, 1000]");
     expectRefused({"blend", "union", "a.vdb", "b.vdb", "-p", "-1"}, "-p must be in [0.1, 1000]");
     expectRefused({"blend", "union", "a.vdb", "fog.vdb", "-p", "10"}, "fog volume");
+    expectRefused({"blend", "union", "a.vdb", "b.vdb", "-k", "0"}, "-k must be > 0");
+    expectRefused({"blend", "union", "a.vdb", "b.vdb", "-k", "-0.1"}, "-k must be > 0");
+    expectRefused({"blend", "union", "a.vdb", "b.vdb", "-k", "nan"}, "-k");
     expectRefused({"blend", "union", "a.vdb", "b.vdb", "-p", "10", "--tolerance", "0"},
                   "--tolerance");
     // An extension that cannot fit is refused with a pointer to the scene-level blend.

@@ -7,6 +7,8 @@
 #include <ivdb/raster/Rasterize.h>
 #include <ivdb/scene/Scene.h>
 
+#include "DistanceChecks.h"
+
 #include <openvdb/math/Operators.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/Composite.h>
@@ -22,6 +24,7 @@ using namespace ivdb;
 using implicit::Implicit;
 using implicit::Vec3d;
 using openvdb::Coord;
+using ivdb::test::unitGradientFraction;
 
 class TestRasterize: public ::testing::Test
 {
@@ -84,22 +87,6 @@ void expectSigns(const openvdb::FloatGrid& g, const Implicit& f, const implicit:
         if ((v < 0.0f) != (fv < 0.0)) ++wrong;
     }
     EXPECT_EQ(wrong, 0) << what;
-}
-
-/// Fraction of the voxels within 1.5 voxels of the surface with |grad phi| in [0.9, 1.1].
-double unitGradientFraction(const openvdb::FloatGrid& g)
-{
-    const double dx = g.voxelSize()[0];
-    auto acc = g.getConstAccessor();
-    size_t n = 0, good = 0;
-    for (auto it = g.cbeginValueOn(); it; ++it) {
-        if (std::abs(*it) >= 1.5 * dx) continue;
-        const auto grad = openvdb::math::ISGradient<openvdb::math::CD_2ND>::result(acc, it.getCoord());
-        const double len = grad.length() / dx;
-        ++n;
-        if (len >= 0.9 && len <= 1.1) ++good;
-    }
-    return n ? double(good) / double(n) : 0.0;
 }
 
 /// Largest |phi| (in voxels), trilinearly interpolated, at the given exact surface points.

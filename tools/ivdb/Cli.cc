@@ -215,7 +215,7 @@ int run(int argc, char** argv)
             const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
             if (subs.empty()) {
                 std::cerr << "ivdb: error: unknown command '" << a
-                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, mesh, glyphs, render, bench (run 'ivdb --help')" << std::endl;
+                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, mesh, glyphs, render, convert, bench (run 'ivdb --help')" << std::endl;
                 return 2;
             }
             break;

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
-// ivdb csg and ivdb blend: sharp or super-elliptic blended CSG of level sets from .vdb files.
+// ivdb csg and ivdb blend: sharp, super-elliptic blended or smooth CSG of level sets from .vdb
+// files.
 #include "Cli.h"
 
 #include <ivdb/jobs/Combine.h>
@@ -16,7 +17,7 @@ struct CombineArgs
     jobs::CombineOptions job;
     std::string compression = "blosc";
     std::string op;
-    double p = 0.0;
+    std::optional<double> p, k;
     bool quiet = false;
 };
 
@@ -24,7 +25,10 @@ int runCombine(CombineArgs& a, bool blend)
 {
     a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
     a.job.op = *implicit::csgOpFromString(a.op);
-    if (blend) a.job.p = a.p;
+    if (blend) {
+        a.job.p = a.p;
+        a.job.k = a.k;
+    }
     std::optional<Progress> progress;
     if (blend) {
         progress.emplace("blend");
@@ -33,7 +37,9 @@ int runCombine(CombineArgs& a, bool blend)
     const jobs::CombineResult r = jobs::combine(a.job);
     printNotes(r.notes, r.warnings);
     if (!a.quiet) {
-        const std::string what = blend ? "blend " + a.op + " p=" + util::formatNumber(a.p) : "csg " + a.op;
+        const std::string what = !blend ? "csg " + a.op
+                               : a.p ? "blend " + a.op + " p=" + util::formatNumber(*a.p)
+                                     : "smooth " + a.op + " k=" + util::formatNumber(*a.k);
         std::printf("%s of %zu level sets: %llu active voxels, read %.3f s, %s %.3f s, total "
                     "%.3f s -> %s\n",
                     what.c_str(), a.job.inputs.size(), (unsigned long long)r.surface->activeVoxelCount(),
@@ -76,14 +82,24 @@ void addCsg(CLI::App& app, Action& action)
 void addBlend(CLI::App& app, Action& action)
 {
     Command cmd(app, "blend",
-        "Super-elliptic blended CSG of level sets: union f = -(1/p) ln(exp(-p fA) + exp(-p fB)), "
-        "intersection the same with -p, difference the intersection with -fB. The blend rounds "
-        "the crease within about ln(2)/p world units. Each input's band is first extended as far "
-        "as p needs, and the result is re-distanced into a narrow band 'surface'");
+        "Blended CSG of level sets. With -p, super-elliptic: union f = -(1/p) ln(exp(-p fA) + "
+        "exp(-p fB)), intersection the same with -p, difference the intersection with -fB; it "
+        "rounds the crease within about ln(2)/p world units. With -k, the smooth minimum of width "
+        "k: union min(fA, fB) - h^2 k/4 with h = max(k - |fA - fB|, 0)/k, intersection max + "
+        "h^2 k/4; it changes the sharp result only where the inputs are within k. Each input's "
+        "band is first extended as far as p or k needs, and the result is re-distanced into a "
+        "narrow band 'surface'");
     auto a = addCombineOptions(cmd);
-    cmd.add("-p", a->p, "Sharpness p in [0.1, 1000], 1/world units (larger is sharper)",
-            &param::kBlendP)
-        ->required();
+    auto* p = cmd.add("-p", a->p, "Sharpness p in [0.1, 1000], 1/world units (larger is sharper)",
+                      &param::kBlendP);
+    auto* k = cmd.add("-k,--smooth", a->k,
+                      "Smooth CSG of width k > 0, world units (instead of -p)", &param::kSmoothK);
+    cmd.name(param::kSmoothK, "-k");
+    p->excludes(k);
+    cmd.app().parse_complete_callback([p, k]() {
+        if (p->count() + k->count() == 0) throw CLI::RequiredError("-p (a blend) or -k (smooth CSG)");
+    });
+
     cmd.add("--tolerance", a->job.tolerance,
             "Error allowed on the surface from the bands' limited reach, in voxels",
             &param::kTolerance)

@@ -29,6 +29,7 @@ int runRasterize(RasterizeArgs& a)
     Progress progress("rasterize " + a.job.scene);
     a.job.interrupter = &progress;
     const jobs::RasterizeResult r = jobs::rasterize(a.job);
+    printNotes(r.notes);
     if (!a.quiet) {
         std::printf("%s: %llu active voxels, grid %s, file %s, peak memory %s, compute %.3f s, "
                     "total %.3f s -> %s\n",

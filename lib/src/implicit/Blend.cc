@@ -2,6 +2,7 @@
 #include <ivdb/implicit/Blend.h>
 
 #include <ivdb/util/Params.h>
+#include <ivdb/util/System.h>
 
 #include <openvdb/Exceptions.h>
 
@@ -11,17 +12,116 @@
 
 namespace ivdb::implicit {
 
-Blend::Blend(Op op, double p, std::vector<Ptr> children)
-    : mOp(op), mP(p), mChildren(std::move(children))
+namespace {
+
+/// A buffer of @a n doubles on the stack for the usual few children, on the heap beyond.
+class Scratch
 {
-    check(limits::kBlendP, p);
-    if (mChildren.empty()) OPENVDB_THROW(openvdb::ValueError, "blend needs children");
-    for (const auto& c : mChildren) {
-        if (!c) OPENVDB_THROW(openvdb::ValueError, "blend has a null child");
+public:
+    explicit Scratch(std::size_t n): mData(mSmall)
+    {
+        if (n > kSmall) {
+            mBig.resize(n);
+            mData = mBig.data();
+        }
     }
+    double* data() { return mData; }
+
+private:
+    static constexpr std::size_t kSmall = 64;
+    double mSmall[kSmall];
+    std::vector<double> mBig;
+    double* mData;
+};
+
+/// The weights d f / d t_i = exp(s p (t_i - e)) / sum of a super-elliptic blend's terms.
+void superEllipticWeights(CsgOp op, double p, const double* t, std::size_t n, double* w)
+{
+    const double s = op == CsgOp::Union ? -1.0 : 1.0;
+    double e = t[0];
+    for (std::size_t i = 0; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
+    double sum = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        w[i] = std::exp(s * p * (t[i] - e));
+        sum += w[i];
+    }
+    for (std::size_t i = 0; i < n; ++i) w[i] /= sum;
 }
 
-std::string Blend::typeName() const { return "blend"; }
+/// One step of the smooth fold: the smooth min (union) or max (intersection, difference) of
+/// @a a and @a b, with d/da in @a da and d/db in @a db.
+double smoothStep(CsgOp op, double a, double b, double k, double& da, double& db)
+{
+    // max(a, b) = -min(-a, -b); the derivatives of min at (-a, -b) are those of max at (a, b).
+    const double s = op == CsgOp::Union ? 1.0 : -1.0;
+    const double sa = s * a, sb = s * b;
+    const double h = std::max(k - std::abs(sa - sb), 0.0) / k;
+    const bool aLeads = sa <= sb;
+    da = aLeads ? 1.0 - 0.5 * h : 0.5 * h;
+    db = 1.0 - da;
+    return s * smoothMin(sa, sb, k);
+}
+
+} // namespace
+
+BlendKernel BlendKernel::superElliptic(double p)
+{
+    check(limits::kBlendP, p);
+    BlendKernel k;
+    k.kind = Kind::SuperElliptic;
+    k.p = p;
+    return k;
+}
+
+BlendKernel BlendKernel::polynomial(double width)
+{
+    check(limits::kSmoothK, width);
+    BlendKernel k;
+    k.kind = Kind::Polynomial;
+    k.k = width;
+    return k;
+}
+
+double BlendKernel::combine(CsgOp op, const double* t, std::size_t n) const
+{
+    if (kind == Kind::SuperElliptic) return blendTerms(op, p, t, n);
+    double s = t[0], da, db;
+    for (std::size_t i = 1; i < n; ++i) s = smoothStep(op, s, t[i], k, da, db);
+    return s;
+}
+
+void BlendKernel::weights(CsgOp op, const double* t, std::size_t n, double* w) const
+{
+    if (kind == Kind::SuperElliptic) return superEllipticWeights(op, p, t, n, w);
+    // Forward through the fold s_i = step(s_{i-1}, t_i), keeping d s_i / d t_i in w[i] and
+    // d s_i / d s_{i-1} in a; then backward: d f / d t_i = w[i] times the later a's.
+    Scratch a(n);
+    double s = t[0];
+    for (std::size_t i = 1; i < n; ++i) s = smoothStep(op, s, t[i], k, a.data()[i], w[i]);
+    double chain = 1.0;
+    for (std::size_t i = n; i-- > 1;) {
+        w[i] *= chain;
+        chain *= a.data()[i];
+    }
+    w[0] = chain;
+}
+
+double BlendKernel::swell(std::size_t n) const
+{
+    return kind == Kind::SuperElliptic ? std::log(double(n)) / p : double(n - 1) * k * 0.25;
+}
+
+double BlendKernel::reach(double toleranceWorld) const
+{
+    if (kind == Kind::Polynomial) return k;
+    return std::max(0.0, std::log(1.0 / (p * toleranceWorld)) / p);
+}
+
+std::string BlendKernel::describe() const
+{
+    return kind == Kind::SuperElliptic ? "p = " + util::formatNumber(p)
+                                       : "k = " + util::formatNumber(k);
+}
 
 double blendTerms(Csg::Op op, double p, const double* t, std::size_t n)
 {
@@ -36,60 +136,53 @@ double blendTerms(Csg::Op op, double p, const double* t, std::size_t n)
     return e + s * std::log(sum) / p;
 }
 
-double Blend::value(const Vec3d& p) const
+Blend::Blend(Op op, double p, std::vector<Ptr> children)
+    : Blend(op, BlendKernel::superElliptic(p), std::move(children))
 {
-    double t[64];
-    std::vector<double> big;
-    double* terms = t;
-    if (mChildren.size() > 64) {
-        big.resize(mChildren.size());
-        terms = big.data();
-    }
-    for (std::size_t i = 0; i < mChildren.size(); ++i) {
-        const double v = mChildren[i]->value(p);
-        terms[i] = (mOp == Op::Difference && i > 0) ? -v : v;
-    }
-    return combine(terms, mChildren.size());
 }
 
-namespace {
-
-/// The weights d f / d t_i = exp(s p (t_i - e)) / sum of a blend's terms @a t (in place), in
-/// the order value() sums them; returns the sum.
-double blendWeights(Csg::Op op, double p, double* t, std::size_t n)
+Blend::Blend(Op op, const BlendKernel& kernel, std::vector<Ptr> children)
+    : mOp(op), mKernel(kernel), mChildren(std::move(children))
 {
-    const double s = op == Csg::Op::Union ? -1.0 : 1.0;
-    double e = t[0];
-    for (std::size_t i = 0; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
-    double sum = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-        t[i] = std::exp(s * p * (t[i] - e));
-        sum += t[i];
+    if (mKernel.kind == BlendKernel::Kind::SuperElliptic) check(limits::kBlendP, mKernel.p);
+    else check(limits::kSmoothK, mKernel.k);
+    if (mChildren.empty()) OPENVDB_THROW(openvdb::ValueError, "blend needs children");
+    for (const auto& c : mChildren) {
+        if (!c) OPENVDB_THROW(openvdb::ValueError, "blend has a null child");
     }
-    return sum;
 }
 
-} // namespace
-
-Vec3d Blend::gradient(const Vec3d& p) const
+std::string Blend::typeName() const
 {
-    // d f / d t_i = w_i: a convex combination of the terms' gradients.
-    double small[64];
-    std::vector<double> big;
-    double* t = small;
-    if (mChildren.size() > 64) {
-        big.resize(mChildren.size());
-        t = big.data();
-    }
+    return mKernel.kind == BlendKernel::Kind::SuperElliptic ? "blend" : "smooth";
+}
+
+void Blend::terms(const Vec3d& p, double* t) const
+{
     for (std::size_t i = 0; i < mChildren.size(); ++i) {
         const double v = mChildren[i]->value(p);
         t[i] = (mOp == Op::Difference && i > 0) ? -v : v;
     }
-    const double sum = blendWeights(mOp, mP, t, mChildren.size());
+}
+
+double Blend::value(const Vec3d& p) const
+{
+    Scratch t(mChildren.size());
+    terms(p, t.data());
+    return mKernel.combine(mOp, t.data(), mChildren.size());
+}
+
+Vec3d Blend::gradient(const Vec3d& p) const
+{
+    // d f / d t_i = w_i: a combination of the terms' gradients.
+    const std::size_t m = mChildren.size();
+    Scratch t(m), w(m);
+    terms(p, t.data());
+    mKernel.weights(mOp, t.data(), m, w.data());
     Vec3d g(0.0);
-    for (std::size_t i = 0; i < mChildren.size(); ++i) {
+    for (std::size_t i = 0; i < m; ++i) {
         const Vec3d gi = mChildren[i]->gradient(p);
-        g += gi * ((mOp == Op::Difference && i > 0) ? -t[i] / sum : t[i] / sum);
+        g += gi * ((mOp == Op::Difference && i > 0) ? -w.data()[i] : w.data()[i]);
     }
     return g;
 }
@@ -109,15 +202,15 @@ void Blend::gradients(const double* x, const double* y, const double* z, double*
         double* g = cg.data() + 3 * c * n;
         mChildren[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
     }
-    std::vector<double> t(m);
+    std::vector<double> t(m), w(m);
     for (std::size_t i = 0; i < n; ++i) {
         for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
-        const double sum = blendWeights(mOp, mP, t.data(), m);
+        mKernel.weights(mOp, t.data(), m, w.data());
         Vec3d g(0.0);
         for (std::size_t c = 0; c < m; ++c) {
             const double* cgc = cg.data() + 3 * c * n;
             const Vec3d gi(cgc[i], cgc[n + i], cgc[2 * n + i]);
-            g += gi * ((mOp == Op::Difference && c > 0) ? -t[c] / sum : t[c] / sum);
+            g += gi * ((mOp == Op::Difference && c > 0) ? -w[c] : w[c]);
         }
         gx[i] = g[0];
         gy[i] = g[1];
@@ -141,7 +234,7 @@ void Blend::values(const double* x, const double* y, const double* z, double* ou
     std::vector<double> t(m);
     for (std::size_t i = 0; i < n; ++i) {
         for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
-        out[i] = combine(t.data(), m);
+        out[i] = mKernel.combine(mOp, t.data(), m);
     }
 }
 
@@ -155,7 +248,7 @@ Interval Blend::interval(const BBoxd& box) const
         lo[c] = iv.lo;
         hi[c] = iv.hi;
     }
-    return {combine(lo.data(), m), combine(hi.data(), m)};
+    return {mKernel.combine(mOp, lo.data(), m), mKernel.combine(mOp, hi.data(), m)};
 }
 
 BBoxd Blend::boundingBox() const
@@ -163,10 +256,10 @@ BBoxd Blend::boundingBox() const
     if (mOp != Op::Union) return Csg(mOp, mChildren).boundingBox();
     BBoxd b = mChildren[0]->boundingBox();
     for (const auto& c : mChildren) {
-        if (!c->isExactSdf()) return infiniteBox();
+        if (!c->isExactOutside()) return infiniteBox();
         b.expand(c->boundingBox());
     }
-    const double grow = std::log(double(mChildren.size())) / mP;
+    const double grow = mKernel.swell(mChildren.size());
     return BBoxd(b.min() - Vec3d(grow), b.max() + Vec3d(grow));
 }
 

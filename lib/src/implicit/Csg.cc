@@ -108,6 +108,15 @@ BBoxd Csg::boundingBox() const
     return infiniteBox();
 }
 
+bool Csg::isExactOutside() const
+{
+    if (mOp != Op::Union) return isExactSdf();
+    for (const auto& c : mChildren) {
+        if (!c->isExactOutside()) return false;
+    }
+    return true;
+}
+
 bool Csg::isExactSdf() const
 {
     return mChildren.size() == 1 && mChildren[0]->isExactSdf();

@@ -2,7 +2,11 @@
 // True distances found locally (docs/method.md#true-distances): foot points on the surface of
 // exact SDFs, of smooth fields (Newton steps), and of CSG nodes (their children's foot points,
 // and the crease where two children meet).
+#include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/Modifiers.h>
+
+#include "Feet.h"
 
 #include <algorithm>
 #include <array>
@@ -426,5 +430,138 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
+
+} // namespace ivdb::implicit
+
+namespace ivdb::implicit {
+
+void detail::iterateUncertified(const Implicit& f, const double* x, const double* y,
+                                const double* z, const double* values, std::size_t n,
+                                const FootQuery& query, FootPoints& out)
+{
+    std::size_t idx[kMaxBatch], m = 0;
+    double sx[kMaxBatch], sy[kMaxBatch], sz[kMaxBatch], sv[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        if (out.ok[i]) continue;
+        idx[m] = i;
+        sx[m] = x[i], sy[m] = y[i], sz[m] = z[i], sv[m] = values[i];
+        ++m;
+    }
+    if (m == 0) return;
+    FootPoints sub;
+    f.Implicit::footPoints(sx, sy, sz, sv, m, query, sub);
+    for (std::size_t k = 0; k < m; ++k) {
+        const std::size_t i = idx[k];
+        out.distance[i] = sub.distance[k];
+        out.x[i] = sub.x[k], out.y[i] = sub.y[k], out.z[i] = sub.z[k];
+        out.ok[i] = sub.ok[k];
+    }
+}
+
+namespace {
+
+/// Foot points on the level set {g = c} of g = s f, for an exact SDF f and signs s = +/-1 per
+/// point (g is |f| for a shell): the point p moved by c - g(p) along grad g reaches g = c there
+/// if the surface it lands on is that level set's nearest point, and since f is 1-Lipschitz no
+/// point of the level set is nearer than |c - g(p)|. Certified where g at the landing point is c
+/// within the tolerance (and, for a shell, f kept its sign); the rest are left uncertified.
+void levelSetFeet(const Implicit& child, const double* x, const double* y, const double* z,
+                  const double* childValues, const double* sign, double level, std::size_t n,
+                  const FootQuery& query, FootPoints& out)
+{
+    double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch], lx[kMaxBatch], ly[kMaxBatch],
+        lz[kMaxBatch], at[kMaxBatch];
+    child.gradients(x, y, z, gx, gy, gz, n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const double len = std::sqrt(gx[i] * gx[i] + gy[i] * gy[i] + gz[i] * gz[i]);
+        const double g = sign[i] * childValues[i];
+        out.distance[i] = g - level;
+        // Beyond the range asked for only "farther" matters, and the value is a lower bound of
+        // the distance (a grid shape's value is clamped to its band there, its gradient zero).
+        out.ok[i] = std::abs(out.distance[i]) >= query.far ||
+                    (len > 0.5 && len < 1.5 && sign[i] != 0.0);
+        const double step = out.ok[i] ? (level - g) * sign[i] / len : 0.0;
+        lx[i] = x[i] + step * gx[i];
+        ly[i] = y[i] + step * gy[i];
+        lz[i] = z[i] + step * gz[i];
+    }
+    child.values(lx, ly, lz, at, n);
+    for (std::size_t i = 0; i < n; ++i) {
+        out.x[i] = lx[i], out.y[i] = ly[i], out.z[i] = lz[i];
+        if (!out.ok[i]) continue;
+        if (std::abs(out.distance[i]) >= query.far) continue; // only "farther" is asked for
+        out.ok[i] = std::abs(sign[i] * at[i] - level) <= query.tolerance &&
+                    (sign[i] * at[i] >= 0.0 || level < 0.0);
+    }
+}
+
+} // namespace
+
+void Offset::footPoints(const double* x, const double* y, const double* z, const double* values,
+                        std::size_t n, const FootQuery& query, FootPoints& out) const
+{
+    if (!mChild->isExactSdf()) return Implicit::footPoints(x, y, z, values, n, query, out);
+    double f[kMaxBatch], sign[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) f[i] = values[i] + mDistance, sign[i] = 1.0;
+    levelSetFeet(*mChild, x, y, z, f, sign, mDistance, n, query, out);
+    detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+}
+
+void Shell::footPoints(const double* x, const double* y, const double* z, const double* values,
+                       std::size_t n, const FootQuery& query, FootPoints& out) const
+{
+    if (!mChild->isExactSdf()) return Implicit::footPoints(x, y, z, values, n, query, out);
+    double f[kMaxBatch], sign[kMaxBatch];
+    mChild->values(x, y, z, f, n);
+    for (std::size_t i = 0; i < n; ++i) sign[i] = f[i] > 0.0 ? 1.0 : f[i] < 0.0 ? -1.0 : 0.0;
+    levelSetFeet(*mChild, x, y, z, f, sign, mHalf, n, query, out);
+    detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+}
+
+void Blend::footPoints(const double* x, const double* y, const double* z, const double* values,
+                       std::size_t n, const FootQuery& query, FootPoints& out) const
+{
+    // Where the deciding child (of exact SDFs) leads the next by more than the blend's reach
+    // and swell, the blend is that child within the tolerance, and so is its distance (the
+    // lead rule); elsewhere, the smooth iteration on the blended field.
+    const std::size_t nc = mChildren.size();
+    bool exact = true;
+    for (const auto& c : mChildren) exact = exact && c->isExactSdf();
+    if (!exact || nc > 64) return Implicit::footPoints(x, y, z, values, n, query, out);
+    auto termSign = [this](std::size_t c) {
+        return mOp == Op::Union ? 1.0 : mOp == Op::Intersection ? -1.0 : (c == 0 ? -1.0 : 1.0);
+    };
+    const double rho = mOp == Op::Union ? 1.0 : -1.0;
+    const double lead = mKernel.reach(query.tolerance) + mKernel.swell(nc);
+    std::vector<std::array<double, kMaxBatch>> childValues(nc);
+    for (std::size_t c = 0; c < nc; ++c) mChildren[c]->values(x, y, z, childValues[c].data(), n);
+    std::size_t decider[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        double first = std::numeric_limits<double>::max(), second = first;
+        for (std::size_t c = 0; c < nc; ++c) {
+            const double u = termSign(c) * childValues[c][i];
+            if (u < first) second = first, first = u, decider[i] = c;
+            else if (u < second) second = u;
+        }
+        out.ok[i] = leadKeepsDistance(first, second, lead);
+        out.distance[i] = rho * first;
+        out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
+    }
+    if (query.feet) {
+        for (std::size_t i = 0; i < n; ++i) {
+            if (!out.ok[i]) continue;
+            const Implicit& c = *mChildren[decider[i]];
+            const Vec3d p(x[i], y[i], z[i]), g = c.gradient(p);
+            const double len = g.length();
+            if (!(len > 0.5 && len < 1.5)) {
+                out.ok[i] = false;
+                continue;
+            }
+            const Vec3d q = p - g * (childValues[decider[i]][i] / len);
+            out.x[i] = q[0], out.y[i] = q[1], out.z[i] = q[2];
+        }
+    }
+    detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+}
 
 } // namespace ivdb::implicit

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace ivdb::implicit {
@@ -34,6 +35,47 @@ inline double boxValue(double x, double y, double z, const Vec3d& c, const Vec3d
     const double outside = std::sqrt(ox * ox + oy * oy + oz * oz);
     const double inside = std::min(std::max(qx, std::max(qy, qz)), 0.0);
     return outside + inside;
+}
+
+/// The gradient of boxValue(): outside, towards the point from its nearest box point; inside,
+/// along the axis of the nearest face.
+Vec3d boxGradient(const Vec3d& p, const Vec3d& c, const Vec3d& h)
+{
+    Vec3d q, s;
+    for (int i = 0; i < 3; ++i) {
+        const double d = p[i] - c[i];
+        s[i] = d < 0.0 ? -1.0 : 1.0;
+        q[i] = std::abs(d) - h[i];
+    }
+    const Vec3d o(std::max(q[0], 0.0), std::max(q[1], 0.0), std::max(q[2], 0.0));
+    const double len = o.length();
+    if (len > 0.0) return Vec3d(s[0] * o[0], s[1] * o[1], s[2] * o[2]) / len;
+    const int axis = (q[0] >= q[1] && q[0] >= q[2]) ? 0 : (q[1] >= q[2] ? 1 : 2);
+    Vec3d g(0.0);
+    g[axis] = s[axis];
+    return g;
+}
+
+/// The point of the segment from @a a to @a a + @a ab nearest to @a p (@a invLen2 = 1 / |ab|^2,
+/// or 0 for a point), as the offset p minus that point.
+inline Vec3d segmentOffset(const Vec3d& p, const Vec3d& a, const Vec3d& ab, double invLen2)
+{
+    const Vec3d pa = p - a;
+    const double h = std::min(1.0, std::max(0.0, pa.dot(ab) * invLen2));
+    return pa - ab * h;
+}
+
+/// The point of the 2D segment (x0, y0)-(x1, y1) nearest to (px, py), into (cx, cy); returns
+/// the squared distance.
+inline double nearestOnSegment2(double px, double py, double x0, double y0, double x1,
+                                double y1, double& cx, double& cy)
+{
+    const double ex = x1 - x0, ey = y1 - y0, len2 = ex * ex + ey * ey;
+    const double h = len2 > 0.0
+        ? std::min(1.0, std::max(0.0, ((px - x0) * ex + (py - y0) * ey) / len2)) : 0.0;
+    cx = x0 + ex * h;
+    cy = y0 + ey * h;
+    return (px - cx) * (px - cx) + (py - cy) * (py - cy);
 }
 
 inline double torusValue(double x, double y, double z, const Vec3d& c, double R, double r)
@@ -120,25 +162,7 @@ Box::Box(const Vec3d& center, const Vec3d& size): mCenter(center), mHalf(size * 
 
 double Box::value(const Vec3d& p) const { return boxValue(p[0], p[1], p[2], mCenter, mHalf); }
 
-Vec3d Box::gradient(const Vec3d& p) const
-{
-    Vec3d q, s;
-    for (int i = 0; i < 3; ++i) {
-        const double d = p[i] - mCenter[i];
-        s[i] = d < 0.0 ? -1.0 : 1.0;
-        q[i] = std::abs(d) - mHalf[i];
-    }
-    const Vec3d o(std::max(q[0], 0.0), std::max(q[1], 0.0), std::max(q[2], 0.0));
-    const double len = o.length();
-    if (len > 0.0) {
-        return Vec3d(s[0] * o[0], s[1] * o[1], s[2] * o[2]) / len;
-    }
-    // Inside: the gradient points along the axis of the nearest face.
-    const int axis = (q[0] >= q[1] && q[0] >= q[2]) ? 0 : (q[1] >= q[2] ? 1 : 2);
-    Vec3d g(0.0);
-    g[axis] = s[axis];
-    return g;
-}
+Vec3d Box::gradient(const Vec3d& p) const { return boxGradient(p, mCenter, mHalf); }
 
 void Box::values(const double* x, const double* y, const double* z, double* out,
                  std::size_t n) const
@@ -196,6 +220,181 @@ BBoxd Torus::boundingBox() const
 {
     const double e = mMajor + mMinor;
     return BBoxd(mCenter - Vec3d(e, e, mMinor), mCenter + Vec3d(e, e, mMinor));
+}
+
+// ---- Capsule ------------------------------------------------------------------------------
+
+Capsule::Capsule(const Vec3d& a, const Vec3d& b, double radius)
+    : mA(a), mAb(b - a), mRadius(radius)
+{
+    requireFinite(a, "capsule a");
+    requireFinite(b, "capsule b");
+    requirePositive(radius, "capsule radius");
+    const double len2 = mAb.lengthSqr();
+    mInvLen2 = len2 > 0.0 ? 1.0 / len2 : 0.0;
+}
+
+double Capsule::value(const Vec3d& p) const
+{
+    return segmentOffset(p, mA, mAb, mInvLen2).length() - mRadius;
+}
+
+Vec3d Capsule::gradient(const Vec3d& p) const
+{
+    const Vec3d d = segmentOffset(p, mA, mAb, mInvLen2);
+    const double len = d.length();
+    return len > 0.0 ? d / len : Vec3d(0.0, 0.0, 1.0);
+}
+
+void Capsule::values(const double* x, const double* y, const double* z, double* out,
+                     std::size_t n) const
+{
+    for (std::size_t i = 0; i < n; ++i) out[i] = value(Vec3d(x[i], y[i], z[i]));
+}
+
+Interval Capsule::interval(const BBoxd& box) const { return lipschitzInterval(*this, box); }
+
+BBoxd Capsule::boundingBox() const
+{
+    const Vec3d b = mA + mAb;
+    return BBoxd(minComponent(mA, b) - Vec3d(mRadius), maxComponent(mA, b) + Vec3d(mRadius));
+}
+
+// ---- RoundedBox -----------------------------------------------------------------------------
+
+RoundedBox::RoundedBox(const Vec3d& center, const Vec3d& size, double radius)
+    : mCenter(center), mInner(size * 0.5 - Vec3d(radius)), mRadius(radius)
+{
+    requireFinite(center, "rounded_box center");
+    requireFinite(size, "rounded_box size");
+    for (int i = 0; i < 3; ++i) requirePositive(size[i], "rounded_box size");
+    requirePositive(radius, "rounded_box radius");
+    const double most = 0.5 * std::min({size[0], size[1], size[2]});
+    if (!(radius <= most)) {
+        std::ostringstream os;
+        os << "rounded_box radius must be <= half the smallest size (" << most << "), got "
+           << radius;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+}
+
+double RoundedBox::value(const Vec3d& p) const
+{
+    return boxValue(p[0], p[1], p[2], mCenter, mInner) - mRadius;
+}
+
+Vec3d RoundedBox::gradient(const Vec3d& p) const { return boxGradient(p, mCenter, mInner); }
+
+void RoundedBox::values(const double* x, const double* y, const double* z, double* out,
+                        std::size_t n) const
+{
+    for (std::size_t i = 0; i < n; ++i) {
+        out[i] = boxValue(x[i], y[i], z[i], mCenter, mInner) - mRadius;
+    }
+}
+
+Interval RoundedBox::interval(const BBoxd& box) const { return lipschitzInterval(*this, box); }
+
+BBoxd RoundedBox::boundingBox() const
+{
+    const Vec3d h = mInner + Vec3d(mRadius);
+    return BBoxd(mCenter - h, mCenter + h);
+}
+
+// ---- CappedCone -----------------------------------------------------------------------------
+
+CappedCone::CappedCone(const Vec3d& a, const Vec3d& b, double radiusA, double radiusB,
+                       std::string name)
+    : mA(a), mRadiusA(radiusA), mRadiusB(radiusB), mName(std::move(name))
+{
+    requireFinite(a, (mName + " a").c_str());
+    requireFinite(b, (mName + " b").c_str());
+    if (!(radiusA >= 0.0) || !(radiusB >= 0.0) || !std::isfinite(radiusA) ||
+        !std::isfinite(radiusB) || (radiusA == 0.0 && radiusB == 0.0)) {
+        std::ostringstream os;
+        os << mName << " radii must be >= 0, finite and not both 0, got " << radiusA << " and "
+           << radiusB;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+    mLength = (b - a).length();
+    if (!(mLength > 0.0)) {
+        OPENVDB_THROW(openvdb::ValueError, mName + " a and b must be different points");
+    }
+    mAxis = (b - a) / mLength;
+    // Any unit vector normal to the axis: the axis crossed with its least aligned unit axis.
+    const int least = std::abs(mAxis[0]) <= std::abs(mAxis[1])
+        ? (std::abs(mAxis[0]) <= std::abs(mAxis[2]) ? 0 : 2)
+        : (std::abs(mAxis[1]) <= std::abs(mAxis[2]) ? 1 : 2);
+    Vec3d e(0.0);
+    e[least] = 1.0;
+    mPerp = mAxis.cross(e).unitSafe();
+}
+
+double CappedCone::distance(const Vec3d& p, double dir[2], Vec3d& radial) const
+{
+    const Vec3d q = p - mA;
+    const double t = q.dot(mAxis);
+    const Vec3d w = q - mAxis * t;
+    const double rho = w.length();
+    radial = rho > 0.0 ? w / rho : mPerp;
+    // The three edges off the axis: the cap at a, the side, the cap at b, with their outward
+    // normals (for a point exactly on one).
+    const double L = mLength, ra = mRadiusA, rb = mRadiusB;
+    const double ends[3][4] = {{0.0, 0.0, ra, 0.0}, {ra, 0.0, rb, L}, {rb, L, 0.0, L}};
+    const double sideLen = std::sqrt((rb - ra) * (rb - ra) + L * L);
+    const double normals[3][2] = {{0.0, -1.0}, {L / sideLen, (ra - rb) / sideLen}, {0.0, 1.0}};
+    double best = std::numeric_limits<double>::max(), bx = 0.0, by = 0.0;
+    int edge = 0;
+    for (int e = 0; e < 3; ++e) {
+        double cx, cy;
+        const double d2 =
+            nearestOnSegment2(rho, t, ends[e][0], ends[e][1], ends[e][2], ends[e][3], cx, cy);
+        if (d2 < best) best = d2, bx = cx, by = cy, edge = e;
+    }
+    const bool inside = t >= 0.0 && t <= L && rho * L <= ra * L + (rb - ra) * t;
+    const double d = std::sqrt(best), s = inside ? -1.0 : 1.0;
+    if (d > 0.0) {
+        dir[0] = s * (rho - bx) / d;
+        dir[1] = s * (t - by) / d;
+    } else {
+        dir[0] = normals[edge][0];
+        dir[1] = normals[edge][1];
+    }
+    return s * d;
+}
+
+double CappedCone::value(const Vec3d& p) const
+{
+    double dir[2];
+    Vec3d radial;
+    return distance(p, dir, radial);
+}
+
+Vec3d CappedCone::gradient(const Vec3d& p) const
+{
+    double dir[2];
+    Vec3d radial;
+    distance(p, dir, radial);
+    return radial * dir[0] + mAxis * dir[1];
+}
+
+void CappedCone::values(const double* x, const double* y, const double* z, double* out,
+                        std::size_t n) const
+{
+    for (std::size_t i = 0; i < n; ++i) out[i] = value(Vec3d(x[i], y[i], z[i]));
+}
+
+Interval CappedCone::interval(const BBoxd& box) const { return lipschitzInterval(*this, box); }
+
+BBoxd CappedCone::boundingBox() const
+{
+    // Each end is a disc normal to the axis: its extent along x_i is r sqrt(1 - axis_i^2).
+    Vec3d ext;
+    for (int i = 0; i < 3; ++i) ext[i] = std::sqrt(std::max(0.0, 1.0 - mAxis[i] * mAxis[i]));
+    const Vec3d b = mA + mAxis * mLength;
+    BBoxd box(mA - ext * mRadiusA, mA + ext * mRadiusA);
+    box.expand(BBoxd(b - ext * mRadiusB, b + ext * mRadiusB));
+    return box;
 }
 
 } // namespace ivdb::implicit

@@ -130,6 +130,11 @@ BBoxd Transform::boundingBox() const
     return mapBox(c, [this](const Vec3d& q) { return toWorld(q); });
 }
 
+bool Transform::isExactOutside() const
+{
+    return mChild->isExactOutside() && mScale[0] == mScale[1] && mScale[1] == mScale[2];
+}
+
 bool Transform::isExactSdf() const
 {
     return mChild->isExactSdf() && mScale[0] == mScale[1] && mScale[1] == mScale[2];

@@ -16,11 +16,16 @@ CombineResult combine(const CombineOptions& opt)
 {
     Stopwatch clock;
     ops::BlendSettings blend;
-    if (opt.p) {
-        blend.p = *opt.p;
+    const bool blended = opt.p || opt.k;
+    if (opt.p && opt.k) {
+        throw ParamError(param::kSmoothK, "cannot be given with p: a blend is either "
+                                          "super-elliptic (p) or smooth (k)");
+    }
+    if (opt.p) check(limits::kBlendP, blend.p = *opt.p);
+    if (opt.k) check(limits::kSmoothK, blend.k = *opt.k);
+    if (blended) {
         blend.tolerance = opt.tolerance;
         blend.interrupter = opt.interrupter;
-        check(limits::kBlendP, blend.p);
         check(limits::kTolerance, blend.tolerance);
     }
     if (opt.inputs.size() < 2) {
@@ -34,7 +39,7 @@ CombineResult combine(const CombineOptions& opt)
     CombineResult result;
     result.readSeconds = clock.lap();
     // In place: the inputs are not needed afterwards.
-    result.surface = opt.p ? ops::blendInPlace(opt.op, grids, blend, &result.notes)
+    result.surface = blended ? ops::blendInPlace(opt.op, grids, blend, &result.notes)
                            : ops::csgInPlace(opt.op, grids, &result.notes);
     grids.clear();
     if (result.surface->activeVoxelCount() == 0) {
@@ -42,9 +47,10 @@ CombineResult combine(const CombineOptions& opt)
                                   "operation needs); the level set written is empty");
     }
     result.computeSeconds = clock.lap();
-    const std::string what = opt.p ? std::string("blend ") + implicit::toString(opt.op) + " p=" +
-                                         util::formatNumber(*opt.p)
-                                   : std::string("csg ") + implicit::toString(opt.op);
+    const std::string what =
+        opt.p ? std::string("blend ") + implicit::toString(opt.op) + " p=" + util::formatNumber(*opt.p)
+        : opt.k ? std::string("blend ") + implicit::toString(opt.op) + " k=" + util::formatNumber(*opt.k)
+                : std::string("csg ") + implicit::toString(opt.op);
     io::stampGrid(*result.surface, what + " " + detail::joined(opt.inputs));
     if (opt.fog) result.density = detail::fogWithStamps(*result.surface);
     detail::writeGrids(opt.output, {result.surface, result.density}, opt.write);

@@ -55,10 +55,14 @@ std::string sceneAsRasterized(const scene::Scene& sc, const raster::RasterSettin
 RasterizeResult rasterize(const RasterizeOptions& opt)
 {
     Stopwatch clock;
-    const scene::Scene sc = scene::loadScene(opt.scene);
+    // The overrides first: mesh and vdb nodes are built at them.
+    if (opt.voxelSize) check(limits::kVoxelSize, *opt.voxelSize);
+    if (opt.halfWidth) check(limits::kHalfWidth, *opt.halfWidth);
+    const scene::Scene sc = scene::loadScene(opt.scene, {opt.voxelSize, opt.halfWidth});
     if (!opt.output.empty()) io::checkOutputPath(opt.output);
 
     RasterizeResult result;
+    result.notes = sc.notes;
     result.settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
     raster::RasterSettings& settings = result.settings;
     settings.sampling = opt.sampling;

@@ -302,7 +302,7 @@ openvdb::FloatGrid::Ptr extendLocally(const openvdb::FloatGrid& grid, const Mask
 
 void checkSettings(size_t inputs, const BlendSettings& settings)
 {
-    check(limits::kBlendP, settings.p);
+    blendKernel(settings);
     check(limits::kTolerance, settings.tolerance);
     if (inputs < 2) {
         throw ParamError(param::kInputs, "must be at least two level sets, got " +
@@ -314,7 +314,8 @@ void checkSettings(size_t inputs, const BlendSettings& settings)
 /// reach and swell), and the memory that may take.
 struct BlendPlan
 {
-    double p = 0.0, dx = 0.0, halfWidth = 0.0, reachVox = 0.0, memoryLimit = 0.0;
+    implicit::BlendKernel kernel;
+    double dx = 0.0, halfWidth = 0.0, reachVox = 0.0, memoryLimit = 0.0;
     float bg = 0.0f; // the output's background, as for the sharp operation
     size_t n = 0;
     int needVox = 0;
@@ -324,13 +325,22 @@ struct BlendPlan
     [[noreturn]] void refuse(double estimate) const
     {
         std::ostringstream os;
-        os << "blend with p = " << util::formatNumber(p) << " reaches " << std::ceil(reachVox)
+        os << "blend with " << kernel.describe() << " reaches " << std::ceil(reachVox)
            << " voxels beyond the surfaces, so the bands must grow to " << needVox
            << " voxels where the inputs meet: about " << util::formatBytes(estimate)
-           << ", more than the " << util::formatBytes(memoryLimit) << " available. Use the "
-           << "scene-level blend ({\"type\": \"blend\", ...} in a scene file, which needs no band "
-           << "extension), a larger p, or a larger tolerance";
+           << ", more than the " << util::formatBytes(memoryLimit) << " available. "
+           << alternatives();
         OPENVDB_THROW(openvdb::RuntimeError, os.str());
+    }
+
+    /// What else would do: the scene-level operation, a sharper kernel.
+    std::string alternatives() const
+    {
+        return kernel.kind == implicit::BlendKernel::Kind::SuperElliptic
+            ? "Use the scene-level blend ({\"type\": \"blend\", ...} in a scene file, which needs "
+              "no band extension), a larger p, or a larger tolerance"
+            : "Use the scene-level smooth CSG ({\"type\": \"smooth\", ...} in a scene file, "
+              "which needs no band extension) or a smaller k";
     }
 
     /// The sweep keeps a few copies of the grown band (values, masks, slices): about 16 bytes a
@@ -360,23 +370,22 @@ BlendPlan planBlend(const std::vector<openvdb::FloatGrid::Ptr>& grids, const Ble
 {
     BlendPlan plan;
     const openvdb::FloatGrid& finest = finestInput(grids);
-    plan.p = settings.p;
+    plan.kernel = blendKernel(settings);
     plan.dx = finest.voxelSize()[0];
     plan.bg = finest.background();
     plan.halfWidth = double(plan.bg) / plan.dx;
     plan.n = grids.size();
     plan.memoryLimit = util::memoryBudget(settings.memoryLimit);
-    plan.reachVox = blendReach(plan.p, settings.tolerance * plan.dx) / plan.dx;
-    if (!(plan.halfWidth + plan.reachVox < 1e6)) {
-        OPENVDB_THROW(openvdb::RuntimeError, "blend with p = " + util::formatNumber(plan.p) +
-            " reaches " + util::formatNumber(std::ceil(plan.reachVox)) + " voxels beyond the "
-            "surfaces, far more than any band can hold. Use the scene-level blend ({\"type\": "
-            "\"blend\", ...} in a scene file, which needs no band extension), a larger p, or a "
-            "larger tolerance");
+    plan.reachVox = plan.kernel.reach(settings.tolerance * plan.dx) / plan.dx;
+    const double swellVox = plan.kernel.swell(plan.n) / plan.dx;
+    if (!(plan.halfWidth + plan.reachVox + swellVox < 1e6)) {
+        OPENVDB_THROW(openvdb::RuntimeError, "blend with " + plan.kernel.describe() +
+            " reaches " + util::formatNumber(std::ceil(plan.reachVox + swellVox)) +
+            " voxels beyond the surfaces, far more than any band can hold. " +
+            plan.alternatives());
     }
-    // The swell ln(n)/p of the blended surface too; see the lead rule in blendValues().
-    plan.needVox = int(std::ceil(plan.halfWidth + plan.reachVox +
-                                 std::log(double(plan.n)) / plan.p / plan.dx)) + 1;
+    // The swell of the blended surface too; see the lead rule in blendValues().
+    plan.needVox = int(std::ceil(plan.halfWidth + plan.reachVox + swellVox)) + 1;
     for (const auto& g : grids) {
         plan.dilation.push_back(
             std::max(0, plan.needVox - int(std::floor(double(g->background()) / plan.dx))));
@@ -474,8 +483,8 @@ BlendedValues blendValues(CsgOp op, const BlendPlan& plan, const BlendSettings& 
 {
     const size_t n = plan.n;
     const float clamp = float(plan.needVox * plan.dx);
-    const double lead = blendReach(plan.p, settings.tolerance * plan.dx) +
-                        std::log(double(n)) / plan.p + plan.dx;
+    const double lead = plan.kernel.reach(settings.tolerance * plan.dx) + plan.kernel.swell(n) +
+                        plan.dx;
     BlendedValues out;
     out.values = openvdb::FloatGrid::create(clamp);
     out.values->setTransform(transform.copy());
@@ -509,7 +518,7 @@ BlendedValues blendValues(CsgOp op, const BlendPlan& plan, const BlendSettings& 
                     v = std::max(-clamp, std::min(clamp, v));
                     t[i] = (op == CsgOp::Difference && i > 0) ? -double(v) : double(v);
                 }
-                const float f = float(implicit::blendTerms(op, plan.p, t.data(), n));
+                const float f = float(plan.kernel.combine(op, t.data(), n));
                 if (!in[k]->isValueOn(m)) { // outside the region: its sign only
                     leaf.setValueOff(m, f > 0.0f ? clamp : -clamp);
                     continue;
@@ -599,11 +608,11 @@ std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& reg
 {
     std::ostringstream os;
     if (!hasCrease) {
-        os << "the inputs do not come within the blend's reach of each other (p = "
-           << util::formatNumber(plan.p) << "): the result is the sharp operation";
+        os << "the inputs do not come within the blend's reach of each other ("
+           << plan.kernel.describe() << "): the result is the sharp operation";
     } else {
-        os << "bands extended to " << plan.needVox << " voxels where the inputs meet, for p = "
-           << util::formatNumber(plan.p) << " (reach "
+        os << "bands extended to " << plan.needVox << " voxels where the inputs meet, for "
+           << plan.kernel.describe() << " (reach "
            << util::formatNumber(std::round(plan.reachVox * 10) / 10) << " voxels; "
            << util::formatNumber(double(region.activeVoxelCount()))
            << " voxels around the crease re-distanced)";
@@ -643,6 +652,12 @@ openvdb::FloatGrid::Ptr blendOnTarget(CsgOp op, const std::vector<openvdb::Float
 }
 
 } // namespace
+
+implicit::BlendKernel blendKernel(const BlendSettings& settings)
+{
+    return settings.k != 0.0 ? implicit::BlendKernel::polynomial(settings.k)
+                            : implicit::BlendKernel::superElliptic(settings.p);
+}
 
 double blendReach(double p, double toleranceWorld)
 {

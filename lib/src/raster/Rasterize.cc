@@ -6,6 +6,7 @@
 #include <ivdb/levelset/Redistance.h>
 
 #include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/GridShape.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/util/Interrupt.h>
 #include <ivdb/util/Params.h>
@@ -847,6 +848,18 @@ std::uint64_t denseMemoryEstimate(const Implicit::Ptr& shape, const RasterSettin
 openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettings& settings)
 {
     const Context ctx = makeContext(shape, settings);
+
+    // A mesh or .vdb level set already on this lattice with this band is its own raster.
+    if (const auto* g = dynamic_cast<const implicit::GridShape*>(shape.get());
+        g && settings.sampling == Sampling::Sparse && !settings.bounds &&
+        g->grid().voxelSize()[0] == settings.voxelSize &&
+        std::abs(g->bandWidth() - ctx.band) <= 1e-6 * ctx.dx) {
+        openvdb::FloatGrid::Ptr grid = g->grid().deepCopy();
+        grid->setGridClass(openvdb::GRID_LEVEL_SET);
+        grid->setName("surface");
+        if (settings.stats) *settings.stats = RasterStats();
+        return grid;
+    }
 
     if (settings.sampling == Sampling::Dense) {
         const Coord d = ctx.region.dim();

@@ -3,22 +3,31 @@
 
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/GridShape.h>
+#include <ivdb/implicit/Modifiers.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
+#include <ivdb/jobs/Inputs.h>
+#include <ivdb/mesh/MeshInput.h>
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/Exceptions.h>
+#include <openvdb/tools/ChangeBackground.h>
+#include <openvdb/tools/FastSweeping.h>
+#include <openvdb/tools/LevelSetRebuild.h>
 
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
 #include <set>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 namespace ivdb::scene {
@@ -169,13 +178,34 @@ private:
     const std::string& mOrigin;
 };
 
+/// What the nodes of one scene are parsed with.
+struct SceneContext
+{
+    std::filesystem::path dir;        // relative paths of mesh and vdb nodes start here
+    std::optional<double> voxelSize;  // what mesh and vdb nodes are built at
+    double halfWidth;                 // the raster's half width, voxels
+    std::vector<std::string>* notes;  // about mesh and vdb inputs
+};
+
+/// Where a node sits: its depth, and the band (world units) within which its values must be
+/// right (the raster's half width, widened by the blends, offsets and shells above it).
+struct Node
+{
+    const SceneContext& scene;
+    int depth;
+    double band;
+    bool lattice = true; // sampled at the raster's voxels only (no transform above)
+
+    Node child(double childBand) const { return {scene, depth + 1, childBand, lattice}; }
+};
+
 Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin,
-                        int depth);
+                        const Node& node);
 
 /// Deeper trees would exhaust the evaluation stack (each level keeps a batch of values on it).
 constexpr int kMaxDepth = 64;
 
-std::vector<Implicit::Ptr> parseChildren(ObjectReader& r, std::size_t minCount, int depth)
+std::vector<Implicit::Ptr> parseChildren(ObjectReader& r, std::size_t minCount, const Node& child)
 {
     const json& c = r.raw("children");
     const std::string cpath = r.childPath("children");
@@ -186,7 +216,7 @@ std::vector<Implicit::Ptr> parseChildren(ObjectReader& r, std::size_t minCount, 
     }
     std::vector<Implicit::Ptr> out;
     for (std::size_t i = 0; i < c.size(); ++i) {
-        out.push_back(parseNode(c[i], cpath + "[" + std::to_string(i) + "]", r.origin(), depth + 1));
+        out.push_back(parseNode(c[i], cpath + "[" + std::to_string(i) + "]", r.origin(), child));
     }
     return out;
 }
@@ -240,20 +270,20 @@ struct NodeType
 {
     const char* name;
     std::vector<std::string> keys;
-    Implicit::Ptr (*build)(ObjectReader& r, const std::string& type, int depth);
+    Implicit::Ptr (*build)(ObjectReader& r, const std::string& type, const Node& node);
 };
 
-Implicit::Ptr buildSphere(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildSphere(ObjectReader& r, const std::string&, const Node&)
 {
     return std::make_shared<implicit::Sphere>(r.vec3("center", kZero), r.positive("radius"));
 }
 
-Implicit::Ptr buildBox(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildBox(ObjectReader& r, const std::string&, const Node&)
 {
     return std::make_shared<implicit::Box>(r.vec3("center", kZero), r.positiveVec3("size"));
 }
 
-Implicit::Ptr buildTorus(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildTorus(ObjectReader& r, const std::string&, const Node&)
 {
     const Vec3d c = r.vec3("center", kZero);
     const double major = r.positive("major_radius"), minor = r.positive("minor_radius");
@@ -264,29 +294,191 @@ Implicit::Ptr buildTorus(ObjectReader& r, const std::string&, int)
     return std::make_shared<implicit::Torus>(c, major, minor);
 }
 
-Implicit::Ptr buildQuadric(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildCapsule(ObjectReader& r, const std::string&, const Node&)
+{
+    return std::make_shared<implicit::Capsule>(r.vec3("a"), r.vec3("b"), r.positive("radius"));
+}
+
+Implicit::Ptr buildRoundedBox(ObjectReader& r, const std::string&, const Node&)
+{
+    const Vec3d c = r.vec3("center", kZero), size = r.positiveVec3("size");
+    const double radius = r.positive("radius");
+    const double most = 0.5 * std::min({size[0], size[1], size[2]});
+    if (!(radius <= most)) {
+        r.fail(r.childPath("radius"), "must be <= half the smallest size (" +
+               util::formatNumber(most) + "), got " + util::formatNumber(radius));
+    }
+    return std::make_shared<implicit::RoundedBox>(c, size, radius);
+}
+
+/// The end points of a capped cylinder or cone: two different points.
+std::pair<Vec3d, Vec3d> segment(ObjectReader& r)
+{
+    const Vec3d a = r.vec3("a"), b = r.vec3("b");
+    if (a == b) r.fail(r.childPath("b"), "must differ from a (the axis runs from a to b)");
+    return {a, b};
+}
+
+Implicit::Ptr buildCappedCylinder(ObjectReader& r, const std::string& type, const Node&)
+{
+    const auto [a, b] = segment(r);
+    const double radius = r.positive("radius");
+    return std::make_shared<implicit::CappedCone>(a, b, radius, radius, type);
+}
+
+Implicit::Ptr buildCappedCone(ObjectReader& r, const std::string& type, const Node&)
+{
+    const auto [a, b] = segment(r);
+    double radii[2];
+    const char* keys[2] = {"radius_a", "radius_b"};
+    for (int i = 0; i < 2; ++i) {
+        radii[i] = r.number(keys[i]);
+        if (!(radii[i] >= 0.0)) {
+            r.fail(r.childPath(keys[i]), "must be >= 0, got " + util::formatNumber(radii[i]));
+        }
+    }
+    if (radii[0] == 0.0 && radii[1] == 0.0) {
+        r.fail(r.childPath("radius_b"), "must be > 0 when radius_a is 0 (a cone needs a base)");
+    }
+    return std::make_shared<implicit::CappedCone>(a, b, radii[0], radii[1], type);
+}
+
+/// The file a mesh or vdb node names, relative to the scene file's folder.
+std::string inputFile(ObjectReader& r, const Node& node)
+{
+    const json& f = r.raw("file");
+    if (!f.is_string() || f.get<std::string>().empty()) {
+        r.fail(r.childPath("file"), "must be a file name (a string), got " + brief(f));
+    }
+    const std::filesystem::path given(f.get<std::string>());
+    const std::filesystem::path path =
+        (given.is_absolute() ? given : node.scene.dir / given).lexically_normal();
+    std::error_code ec;
+    if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec)) {
+        r.fail(r.childPath("file"), path.string() + " is not a regular file (a folder or a "
+               "device); name a mesh or .vdb file");
+    }
+    return path.string();
+}
+
+/// What a mesh or vdb node is built at: the scene's voxel size, and a half width (voxels) of the
+/// node's band (widened by at most kMaxExtraBand voxels beyond the raster's half width for the
+/// blends above) plus a margin: none for the whole scene (then a mesh's grid is exactly
+/// OpenVDB's meshToLevelSet at the raster's half width), a voxel for the gradients a CSG reads,
+/// two for interpolation under a transform.
+constexpr double kMaxExtraBand = 64.0;
+
+struct GridBuild
+{
+    double dx, band, margin;
+};
+
+GridBuild gridBuild(ObjectReader& r, const std::string& type, const Node& node)
+{
+    if (!node.scene.voxelSize) {
+        r.fail(r.path(), "a " + type + " node is built at the scene's voxel size: add "
+               "\"voxel_size\" to the scene (or give one on the command line)");
+    }
+    const double dx = *node.scene.voxelSize;
+    double band = std::ceil(node.band / dx - 1e-9);
+    const double most = node.scene.halfWidth + kMaxExtraBand;
+    if (band > most) {
+        node.scene.notes->push_back(r.origin() + ": " + r.path() + ": the blends above this " +
+            type + " reach " + util::formatNumber(band - node.scene.halfWidth) + " voxels beyond "
+            "the band; its distances are built " + util::formatNumber(kMaxExtraBand) + " voxels "
+            "wider only, and the blend sees that band's edge value beyond");
+        band = most;
+    }
+    return {dx, std::max(band, 1.0), node.lattice ? (node.depth > 0 ? 2.0 : 0.0) : 3.0};
+}
+
+Implicit::Ptr buildMesh(ObjectReader& r, const std::string& type, const Node& node)
+{
+    const std::string file = inputFile(r, node);
+    const GridBuild build = gridBuild(r, type, node);
+    const double dx = build.dx;
+    mesh::TriangleMesh m;
+    try {
+        m = mesh::readTriangleMesh(file);
+    } catch (const openvdb::Exception& e) {
+        r.fail(r.childPath("file"), util::errorText(e));
+    }
+    if (const std::size_t open = mesh::openEdges(m)) {
+        node.scene.notes->push_back(file + ": the mesh is not closed (" + std::to_string(open) +
+            " edges not shared by exactly two triangles): its inside is what OpenVDB's "
+            "mesh-to-volume makes of it, which may leak through the gaps (docs/scene-format.md#mesh)");
+    }
+    auto grid = mesh::meshDistance(m, dx, build.band + build.margin);
+    if (grid->activeVoxelCount() == 0) {
+        r.fail(r.childPath("file"), "the mesh in " + file + " has no voxel at voxel size " +
+               util::formatNumber(dx) + " (it is smaller than a voxel or flat)");
+    }
+    return std::make_shared<implicit::GridShape>(grid, type);
+}
+
+Implicit::Ptr buildVdb(ObjectReader& r, const std::string& type, const Node& node)
+{
+    const std::string file = inputFile(r, node);
+    std::string gridName;
+    if (r.has("grid")) {
+        const json& g = r.raw("grid");
+        if (!g.is_string()) r.fail(r.childPath("grid"), "must be a grid name (a string), got " + brief(g));
+        gridName = g.get<std::string>();
+    }
+    const GridBuild build = gridBuild(r, type, node);
+    const double dx = build.dx;
+    openvdb::FloatGrid::Ptr grid;
+    try {
+        grid = jobs::readLevelSet(file, gridName);
+    } catch (const openvdb::Exception& e) {
+        r.fail(r.childPath(r.has("grid") ? "grid" : "file"), util::errorText(e));
+    }
+    const openvdb::math::Transform::Ptr lattice =
+        openvdb::math::Transform::createLinearTransform(dx);
+    // On another lattice it is rebuilt (through a mesh of its surface, which moves it by a
+    // fraction of a voxel); on the scene's, a band narrower than the node needs is extended by
+    // fast sweeping and the voxels it has are kept.
+    const bool moved = !(grid->transform() == *lattice);
+    const double halfWidth = build.band + build.margin;
+    const int missing = int(std::ceil(halfWidth - double(grid->background()) / dx - 1e-6));
+    if (!moved && missing > 0) {
+        grid = openvdb::tools::dilateSdf(*grid, missing, openvdb::tools::NN_FACE_EDGE_VERTEX);
+        openvdb::tools::changeLevelSetBackground(grid->tree(), float(halfWidth * dx));
+    } else if (moved) {
+        std::ostringstream os;
+        os << file << ": grid '" << grid->getName() << "' (voxel size " << grid->voxelSize()[0]
+           << ", band " << grid->background() / grid->voxelSize()[0] << " voxels) rebuilt at "
+           << "the scene's voxel size " << dx << " with a band of " << halfWidth << " voxels";
+        node.scene.notes->push_back(os.str());
+        grid = openvdb::tools::levelSetRebuild(*grid, 0.0f, float(halfWidth), float(halfWidth),
+                                               lattice.get());
+    }
+    return std::make_shared<implicit::GridShape>(grid, type);
+}
+
+Implicit::Ptr buildQuadric(ObjectReader& r, const std::string&, const Node&)
 {
     return std::make_shared<implicit::Quadric>(parseMatrix(r));
 }
 
-Implicit::Ptr buildPlane(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildPlane(ObjectReader& r, const std::string&, const Node&)
 {
     const Vec3d n = axis(r, "normal", std::nullopt);
     return implicit::makePlane(n, r.number("offset", 0.0));
 }
 
-Implicit::Ptr buildCylinder(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildCylinder(ObjectReader& r, const std::string&, const Node&)
 {
     const Vec3d c = r.vec3("center", kZero), a = axis(r, "axis", kZAxis);
     return implicit::makeCylinder(c, a, r.positive("radius"));
 }
 
-Implicit::Ptr buildEllipsoid(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildEllipsoid(ObjectReader& r, const std::string&, const Node&)
 {
     return implicit::makeEllipsoid(r.vec3("center", kZero), r.positiveVec3("radii"));
 }
 
-Implicit::Ptr buildCone(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildCone(ObjectReader& r, const std::string&, const Node&)
 {
     const Vec3d apex = r.vec3("apex", kZero), a = axis(r, "axis", kZAxis);
     const double angle = r.number("half_angle_deg");
@@ -297,7 +489,7 @@ Implicit::Ptr buildCone(ObjectReader& r, const std::string&, int)
     return implicit::makeCone(apex, a, angle);
 }
 
-Implicit::Ptr buildParaboloid(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildParaboloid(ObjectReader& r, const std::string&, const Node&)
 {
     const Vec3d v = r.vec3("vertex", kZero), a = axis(r, "axis", kZAxis);
     const bool hyperbolic =
@@ -305,7 +497,7 @@ Implicit::Ptr buildParaboloid(ObjectReader& r, const std::string&, int)
     return implicit::makeParaboloid(v, a, hyperbolic, r.positive("a", 1.0), r.positive("b", 1.0));
 }
 
-Implicit::Ptr buildHyperboloid(ObjectReader& r, const std::string&, int)
+Implicit::Ptr buildHyperboloid(ObjectReader& r, const std::string&, const Node&)
 {
     const Vec3d c = r.vec3("center", kZero), a = axis(r, "axis", kZAxis);
     const bool two =
@@ -313,21 +505,58 @@ Implicit::Ptr buildHyperboloid(ObjectReader& r, const std::string&, int)
     return implicit::makeHyperboloid(c, a, two, r.positiveVec3("radii", Vec3d(1.0)));
 }
 
-Implicit::Ptr buildCsg(ObjectReader& r, const std::string& type, int depth)
+Implicit::Ptr buildCsg(ObjectReader& r, const std::string& type, const Node& node)
 {
     return std::make_shared<implicit::Csg>(*implicit::csgOpFromString(type),
-                                           parseChildren(r, 1, depth));
+                                           parseChildren(r, 1, node.child(node.band)));
 }
 
-Implicit::Ptr buildBlend(ObjectReader& r, const std::string&, int depth)
+/// A blend's children must be right as far beyond the band as the blend reaches (for a
+/// rasterizer tolerance of 0.05 voxel), and as far as its surface swells.
+Implicit::Ptr blendOf(ObjectReader& r, const std::string& op, const implicit::BlendKernel& kernel,
+                      const Node& node)
+{
+    double band = node.band;
+    if (node.scene.voxelSize) {
+        const std::size_t n = r.has("children") && r.raw("children").is_array()
+                                  ? std::max<std::size_t>(r.raw("children").size(), 1) : 1;
+        band += kernel.reach(0.05 * *node.scene.voxelSize) + kernel.swell(n);
+    }
+    return std::make_shared<implicit::Blend>(*implicit::csgOpFromString(op), kernel,
+                                             parseChildren(r, 2, node.child(band)));
+}
+
+Implicit::Ptr buildBlend(ObjectReader& r, const std::string&, const Node& node)
 {
     const std::string op = r.string("op", implicit::csgOpNames());
     const double sharp = r.limited("p", limits::kBlendP);
-    return std::make_shared<implicit::Blend>(*implicit::csgOpFromString(op), sharp,
-                                             parseChildren(r, 2, depth));
+    return blendOf(r, op, implicit::BlendKernel::superElliptic(sharp), node);
 }
 
-Implicit::Ptr buildTransform(ObjectReader& r, const std::string&, int depth)
+Implicit::Ptr buildSmooth(ObjectReader& r, const std::string&, const Node& node)
+{
+    const std::string op = r.string("op", implicit::csgOpNames());
+    const double k = r.limited("k", limits::kSmoothK);
+    return blendOf(r, op, implicit::BlendKernel::polynomial(k), node);
+}
+
+Implicit::Ptr buildOffset(ObjectReader& r, const std::string&, const Node& node)
+{
+    const double d = r.number("distance");
+    auto child = parseNode(r.raw("child"), r.childPath("child"), r.origin(),
+                           node.child(node.band + std::abs(d)));
+    return std::make_shared<implicit::Offset>(child, d);
+}
+
+Implicit::Ptr buildShell(ObjectReader& r, const std::string&, const Node& node)
+{
+    const double t = r.positive("thickness");
+    auto child = parseNode(r.raw("child"), r.childPath("child"), r.origin(),
+                           node.child(node.band + 0.5 * t));
+    return std::make_shared<implicit::Shell>(child, t);
+}
+
+Implicit::Ptr buildTransform(ObjectReader& r, const std::string&, const Node& node)
 {
     Vec3d scale(1.0);
     if (r.has("scale")) {
@@ -341,7 +570,11 @@ Implicit::Ptr buildTransform(ObjectReader& r, const std::string&, int depth)
         }
     }
     const Vec3d t = r.vec3("translate", kZero), rot = r.vec3("rotate_deg", kZero);
-    auto child = parseNode(r.raw("child"), r.childPath("child"), r.origin(), depth + 1);
+    // The child's values are scaled by the smallest scale: its band must be that much wider.
+    const double least = std::min({scale[0], scale[1], scale[2]});
+    Node under = node.child(node.band / least);
+    under.lattice = false;
+    auto child = parseNode(r.raw("child"), r.childPath("child"), r.origin(), under);
     return std::make_shared<implicit::Transform>(child, t, rot, scale);
 }
 
@@ -351,6 +584,10 @@ const std::vector<NodeType>& nodeTypes()
         {"sphere", {"center", "radius"}, buildSphere},
         {"box", {"center", "size"}, buildBox},
         {"torus", {"center", "major_radius", "minor_radius"}, buildTorus},
+        {"capsule", {"a", "b", "radius"}, buildCapsule},
+        {"rounded_box", {"center", "size", "radius"}, buildRoundedBox},
+        {"capped_cylinder", {"a", "b", "radius"}, buildCappedCylinder},
+        {"capped_cone", {"a", "b", "radius_a", "radius_b"}, buildCappedCone},
         {"quadric", {"matrix"}, buildQuadric},
         {"plane", {"normal", "offset"}, buildPlane},
         {"cylinder", {"center", "axis", "radius"}, buildCylinder},
@@ -362,13 +599,19 @@ const std::vector<NodeType>& nodeTypes()
         {"intersection", {"children"}, buildCsg},
         {"difference", {"children"}, buildCsg},
         {"blend", {"op", "p", "children"}, buildBlend},
-        {"transform", {"translate", "rotate_deg", "scale", "child"}, buildTransform}};
+        {"smooth", {"op", "k", "children"}, buildSmooth},
+        {"offset", {"distance", "child"}, buildOffset},
+        {"shell", {"thickness", "child"}, buildShell},
+        {"transform", {"translate", "rotate_deg", "scale", "child"}, buildTransform},
+        {"mesh", {"file"}, buildMesh},
+        {"vdb", {"file", "grid"}, buildVdb}};
     return types;
 }
 
 Implicit::Ptr parseNode(const json& j, const std::string& path, const std::string& origin,
-                        int depth)
+                        const Node& at)
 {
+    const int depth = at.depth;
     ObjectReader r(j, path, origin);
     if (depth > kMaxDepth) {
         r.fail(path, "the shape tree is nested more than " + std::to_string(kMaxDepth) +
@@ -377,13 +620,14 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
     std::vector<std::string> names;
     for (const NodeType& t : nodeTypes()) names.push_back(t.name);
     const std::string type = r.string("type", names);
-    const NodeType& node = nodeTypes()[size_t(std::find(names.begin(), names.end(), type) - names.begin())];
+    const NodeType& node =
+        nodeTypes()[size_t(std::find(names.begin(), names.end(), type) - names.begin())];
     std::vector<std::string> keys = {"type"};
     keys.insert(keys.end(), node.keys.begin(), node.keys.end());
     r.allowOnly(keys);
     // Library constructors validate too; their messages get this node's path.
     try {
-        return node.build(r, type, depth);
+        return node.build(r, type, at);
     } catch (const SceneError&) {
         throw;
     } catch (const openvdb::Exception& e) {
@@ -393,7 +637,8 @@ Implicit::Ptr parseNode(const json& j, const std::string& path, const std::strin
 
 } // namespace
 
-Scene parseScene(const std::string& text, const std::string& origin)
+Scene parseScene(const std::string& text, const std::string& origin,
+                 const SceneOverrides& overrides)
 {
     json j;
     try {
@@ -425,19 +670,23 @@ Scene parseScene(const std::string& text, const std::string& origin)
         }
         scene.bounds = implicit::BBoxd(lo, hi);
     }
-    scene.shape = parseNode(r.raw("shape"), "shape", origin, 0);
+    const SceneContext context{std::filesystem::path(origin).parent_path(),
+                               overrides.voxelSize ? overrides.voxelSize : scene.voxelSize,
+                               overrides.halfWidth.value_or(scene.halfWidth), &scene.notes};
+    const Node top{context, 0, context.voxelSize ? context.halfWidth * *context.voxelSize : 0.0};
+    scene.shape = parseNode(r.raw("shape"), "shape", origin, top);
     scene.json = j.dump();
     return scene;
 }
 
-Scene loadScene(const std::string& path)
+Scene loadScene(const std::string& path, const SceneOverrides& overrides)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in) throw SceneError(path + ": cannot open the scene file (does it exist and is it readable?)");
     std::ostringstream ss;
     ss << in.rdbuf();
     if (in.bad()) throw SceneError(path + ": cannot read the scene file");
-    return parseScene(ss.str(), path);
+    return parseScene(ss.str(), path, overrides);
 }
 
 } // namespace ivdb::scene

@@ -3,30 +3,80 @@
 
 #include <ivdb/implicit/Csg.h>
 
+#include <algorithm>
+#include <cmath>
+#include <string>
 #include <vector>
 
 namespace ivdb::implicit {
+
+/// @brief How a blended CSG combines its children's values: the super-elliptic blend of
+/// sharpness p (docs/method.md#super-elliptic-blend) or the polynomial smooth minimum of width k
+/// (docs/method.md#smooth-csg).
+/// @details Both take the terms t_i: the children's values, negated for the ones a difference
+/// subtracts. Both are monotone in every term, so a blend of intervals is an interval.
+struct BlendKernel
+{
+    enum class Kind {
+        SuperElliptic, ///< union -(1/p) ln sum exp(-p t_i); intersection (1/p) ln sum exp(p t_i)
+        Polynomial     ///< union min(a, b) - h^2 k / 4, h = max(k - |a - b|, 0) / k, from the left
+    };
+
+    Kind kind = Kind::SuperElliptic;
+    double p = 10.0; ///< SuperElliptic: sharpness, 1/world units
+    double k = 0.0;  ///< Polynomial: width, world units
+
+    /// @throw ParamError unless @a p is in limits::kBlendP
+    static BlendKernel superElliptic(double p);
+    /// @throw ParamError unless @a k is in limits::kSmoothK
+    static BlendKernel polynomial(double k);
+
+    /// @brief The blended value of the @a n terms @a t.
+    double combine(CsgOp op, const double* t, std::size_t n) const;
+    /// @brief The partial derivatives d f / d t_i of combine() into @a w (n values).
+    void weights(CsgOp op, const double* t, std::size_t n, double* w) const;
+    /// @brief How far (world units) a blended union's surface may lie beyond the sharp
+    /// union's, for exact-distance terms: ln(n)/p, or (n - 1) k/4 for the smooth minimum.
+    double swell(std::size_t n) const;
+    /// @brief How far (world units) apart two terms may be and still change the result by more
+    /// than @a toleranceWorld: ln(1 / (p tolerance)) / p, or exactly k for the smooth minimum.
+    double reach(double toleranceWorld) const;
+    /// @brief "p = 4" or "k = 0.1", for messages.
+    std::string describe() const;
+};
 
 /// @brief The blended value of the signed terms @a t (children's values, negated for the ones a
 /// difference subtracts): union -(1/p) ln sum exp(-p t_i), intersection and difference
 /// (1/p) ln sum exp(p t_i), evaluated around the extreme term so that nothing overflows.
 double blendTerms(Csg::Op op, double p, const double* t, std::size_t n);
 
-/// @brief Super-elliptic blended CSG (docs/method.md#super-elliptic-blend) over any number of children.
-/// @details With the density D = exp(-f): union f = -(1/p) ln(sum exp(-p f_i)); intersection the
-/// same with -p; difference = intersection of the first child with the others negated. Computed as
-/// a log-sum-exp around the extreme term, so no exp overflows or underflows to -inf for any p in
-/// [0.1, 1000] and any finite values. The blend rounds the crease within about ln(2)/p world
-/// units of it; it is not a distance (|grad f| < 1 near the crease), so the rasterizer
-/// re-distances it.
+/// @brief The polynomial smooth minimum of @a a and @a b with width @a k > 0:
+/// min(a, b) - h^2 k / 4 with h = max(k - |a - b|, 0) / k. Equal to min(a, b) where the two
+/// differ by k or more; C1 everywhere.
+inline double smoothMin(double a, double b, double k)
+{
+    const double d = a - b, h = std::max(k - std::abs(d), 0.0) / k;
+    return std::min(a, b) - h * h * k * 0.25;
+}
+
+/// @brief Blended CSG over any number of children: the super-elliptic blend (scene type
+/// "blend") or the polynomial smooth minimum (scene type "smooth"); see BlendKernel.
+/// @details The super-elliptic blend is a log-sum-exp around the extreme term, so no exp
+/// overflows for any p in [0.1, 1000] and any finite values; it rounds the crease within about
+/// ln(2)/p world units of it. The smooth minimum folds its children from the left and differs
+/// from the sharp operation only where two terms are within k of each other. Neither is a
+/// distance near the crease (|grad f| < 1 there), so the rasterizer finds the distances.
 class Blend final: public Implicit
 {
 public:
     using Op = Csg::Op;
 
+    /// A super-elliptic blend of sharpness @a p.
     /// @throw ParamError if @a p is not in limits::kBlendP; openvdb::ValueError if @a children
     /// is empty or holds a null pointer
     Blend(Op op, double p, std::vector<Ptr> children);
+    /// @throw openvdb::ValueError if @a children is empty or holds a null pointer
+    Blend(Op op, const BlendKernel& kernel, std::vector<Ptr> children);
 
     double value(const Vec3d& p) const override;
     Vec3d gradient(const Vec3d& p) const override;
@@ -34,23 +84,31 @@ public:
                 std::size_t n) const override;
     void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                    double* gz, std::size_t n) const override;
+    /// Exact SDF children: where the deciding child leads the next by the kernel's reach and
+    /// swell (the lead rule, docs/method.md#true-distances), its distance and foot point; the
+    /// smooth iteration elsewhere.
+    void footPoints(const double* x, const double* y, const double* z, const double* values,
+                    std::size_t n, const FootQuery& query, FootPoints& out) const override;
     /// Exact for a blend of exact intervals: the blend is monotone in every child.
     Interval interval(const BBoxd& box) const override;
-    /// Union: the children's boxes grown by ln(n)/p when every child is an exact SDF (the blend
-    /// reaches at most that far beyond them), else unbounded. Intersection, difference: within
-    /// the sharp result.
+    /// Union: the children's boxes grown by BlendKernel::swell() when every child is exact
+    /// outside (the blend reaches at most that far beyond them), else unbounded. Intersection,
+    /// difference: within the sharp result.
     BBoxd boundingBox() const override;
     bool isExactSdf() const override { return false; }
     std::string typeName() const override;
 
     Op op() const { return mOp; }
-    double sharpness() const { return mP; }
+    const BlendKernel& kernel() const { return mKernel; }
+    /// The super-elliptic sharpness p (kernel().p).
+    double sharpness() const { return mKernel.p; }
 
 private:
-    double combine(const double* terms, std::size_t n) const { return blendTerms(mOp, mP, terms, n); }
+    /// The children's values at @a p as terms (negated where a difference subtracts them).
+    void terms(const Vec3d& p, double* t) const;
 
     Op mOp;
-    double mP;
+    BlendKernel mKernel;
     std::vector<Ptr> mChildren;
 };
 

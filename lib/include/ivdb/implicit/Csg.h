@@ -33,6 +33,8 @@ public:
     Interval interval(const BBoxd& box) const override;
     BBoxd boundingBox() const override;
     bool isExactSdf() const override;
+    /// A union of shapes exact outside is the distance outside it.
+    bool isExactOutside() const override;
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override;
 
@@ -76,6 +78,7 @@ public:
     Interval interval(const BBoxd& box) const override;
     BBoxd boundingBox() const override;
     bool isExactSdf() const override;
+    bool isExactOutside() const override;
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "transform"; }
 

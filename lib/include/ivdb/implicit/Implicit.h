@@ -89,6 +89,10 @@ public:
     virtual BBoxd boundingBox() const = 0;
     /// @brief True if value() is the exact signed Euclidean distance to the surface.
     virtual bool isExactSdf() const = 0;
+    /// @brief True if value() is the exact distance wherever it is positive (outside): exact
+    /// SDFs, unions of such, shapes grown from them. Where this holds, the shape's inside lies
+    /// within a distance d of the points where value() < d, which bounds grown shapes.
+    virtual bool isExactOutside() const { return isExactSdf(); }
     /// @brief A node equal to this one at every point of @a box, possibly simpler
     /// (a union drops children that cannot be the minimum there).
     virtual Ptr prune(const BBoxd& box) const;

@@ -3,6 +3,8 @@
 
 #include <ivdb/implicit/Implicit.h>
 
+#include <string>
+
 namespace ivdb::implicit {
 
 /// @brief Exact signed distance to a sphere: |p - c| - r.
@@ -70,6 +72,83 @@ public:
 private:
     Vec3d mCenter;
     double mMajor, mMinor;
+};
+
+/// @brief Exact signed distance to a capsule: the points within @a radius of the segment ab.
+class Capsule final: public Implicit
+{
+public:
+    /// @throw openvdb::ValueError if @a radius <= 0 or any input is not finite (a == b is a
+    /// sphere)
+    Capsule(const Vec3d& a, const Vec3d& b, double radius);
+
+    double value(const Vec3d& p) const override;
+    Vec3d gradient(const Vec3d& p) const override;
+    void values(const double* x, const double* y, const double* z, double* out,
+                std::size_t n) const override;
+    Interval interval(const BBoxd& box) const override;
+    BBoxd boundingBox() const override;
+    bool isExactSdf() const override { return true; }
+    std::string typeName() const override { return "capsule"; }
+
+private:
+    Vec3d mA, mAb;
+    double mInvLen2, mRadius;
+};
+
+/// @brief Exact signed distance to an axis-aligned box of full edge lengths @a size whose edges
+/// and corners are rounded with @a radius (the box of size - 2 radius grown by radius).
+class RoundedBox final: public Implicit
+{
+public:
+    /// @throw openvdb::ValueError unless 0 < radius <= min(size) / 2 and every input is finite
+    RoundedBox(const Vec3d& center, const Vec3d& size, double radius);
+
+    double value(const Vec3d& p) const override;
+    Vec3d gradient(const Vec3d& p) const override;
+    void values(const double* x, const double* y, const double* z, double* out,
+                std::size_t n) const override;
+    Interval interval(const BBoxd& box) const override;
+    BBoxd boundingBox() const override;
+    bool isExactSdf() const override { return true; }
+    std::string typeName() const override { return "rounded_box"; }
+
+private:
+    Vec3d mCenter, mInner; // mInner: half the size of the box before rounding
+    double mRadius;
+};
+
+/// @brief Exact signed distance to the solid truncated cone between the points @a a and @a b,
+/// of radius @a radiusA at a and @a radiusB at b (a capped cylinder when they are equal).
+/// @details In the half-plane through the axis, at (distance from the axis, distance along it),
+/// the solid is a trapezoid; the distance is the one to its three edges off the axis (the two
+/// caps and the side).
+class CappedCone final: public Implicit
+{
+public:
+    /// @param name  the scene type, "capped_cone" or "capped_cylinder"
+    /// @throw openvdb::ValueError if a == b, a radius is < 0, both are 0, or an input is not
+    /// finite
+    CappedCone(const Vec3d& a, const Vec3d& b, double radiusA, double radiusB,
+               std::string name = "capped_cone");
+
+    double value(const Vec3d& p) const override;
+    Vec3d gradient(const Vec3d& p) const override;
+    void values(const double* x, const double* y, const double* z, double* out,
+                std::size_t n) const override;
+    Interval interval(const BBoxd& box) const override;
+    BBoxd boundingBox() const override;
+    bool isExactSdf() const override { return true; }
+    std::string typeName() const override { return mName; }
+
+private:
+    /// The signed distance, and in @a dir the unit direction of increase in (radial, axial)
+    /// coordinates of the half-plane; @a radial the unit radial direction.
+    double distance(const Vec3d& p, double dir[2], Vec3d& radial) const;
+
+    Vec3d mA, mAxis, mPerp; // mAxis: unit a -> b; mPerp: a unit vector normal to it
+    double mLength, mRadiusA, mRadiusB;
+    std::string mName;
 };
 
 /// @brief Interval of a 1-Lipschitz function over @a box from its value at the box center:

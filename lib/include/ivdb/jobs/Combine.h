@@ -13,14 +13,16 @@
 
 namespace ivdb::jobs {
 
-/// @brief What combine() does: sharp CSG or a super-elliptic blend of level sets from files.
+/// @brief What combine() does: sharp CSG, a super-elliptic blend or a smooth CSG of level sets
+/// from files.
 struct CombineOptions
 {
     implicit::CsgOp op = implicit::CsgOp::Union;
     std::vector<std::string> inputs;  ///< two or more .vdb files
     std::string output;               ///< the .vdb written atomically; empty: none
     std::string grid;                 ///< the grid in every input; empty: each file's first level set
-    std::optional<double> p;          ///< set: a blend of this sharpness; unset: sharp CSG
+    std::optional<double> p;          ///< set: a blend of this sharpness
+    std::optional<double> k;          ///< set: a smooth CSG of this width (world units)
     double tolerance = 0.05;          ///< a blend's allowed error from the bands' reach, voxels
     bool fog = false;                 ///< also a `density` fog volume
     io::WriteOptions write;                ///< compression and half floats on disk
@@ -36,8 +38,10 @@ struct CombineResult
 };
 
 /// @brief Read the inputs' level sets (readLevelSet), resample them onto the finest, combine
-/// them (ops::csgInPlace or ops::blendInPlace) and write the result atomically.
-/// @throw ParamError for fewer than two inputs or a bad p or tolerance; what readLevelSet and
+/// them (ops::csgInPlace, or ops::blendInPlace when p or k is set) and write the result
+/// atomically.
+/// @throw ParamError for fewer than two inputs, both p and k, or a bad p, k or tolerance; what
+/// readLevelSet and
 /// the operations throw. Nothing is written on any error.
 CombineResult combine(const CombineOptions& options);
 

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace ivdb::jobs {
 
@@ -46,6 +47,7 @@ struct RasterizeResult
     double totalSeconds = 0.0;        ///< everything, writing included
     std::uint64_t fileBytes = 0;      ///< the output's size (0 without output)
     raster::RasterStats stats;        ///< how true distances were found (shapes not exact SDFs)
+    std::vector<std::string> notes;   ///< the scene's: open meshes, rebuilt .vdb inputs
 };
 
 /// @brief Rasterize a scene file into a level set (and a fog volume), stamped with the scene as

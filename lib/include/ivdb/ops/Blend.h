@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #pragma once
 
+#include <ivdb/implicit/Blend.h>
 #include <ivdb/ops/Csg.h>
 
 #include <openvdb/util/NullInterrupter.h>
@@ -13,6 +14,10 @@ struct BlendSettings
 {
     /// Sharpness p in [0.1, 1000] (1/world units): the blend reaches about ln(2)/p from the crease.
     double p = 10.0;
+    /// Nonzero: the polynomial smooth minimum of this width (world units) instead of the
+    /// super-elliptic blend (implicit::BlendKernel); it changes the sharp result only where two
+    /// inputs are within k of each other, so the bands grow by exactly k (no tolerance).
+    double k = 0.0;
     /// Error allowed on the blended surface from the bands' limited reach, in voxels.
     double tolerance = 0.05;
     /// Memory the band extension may use, in bytes; 0 means 80% of the available memory.
@@ -25,7 +30,7 @@ struct BlendSettings
 /// term d beyond the others contributes at most exp(-p d) / p.
 double blendReach(double p, double toleranceWorld);
 
-/// @brief Super-elliptic blended CSG of level sets (docs/method.md#grid-blend) on grids.
+/// @brief Super-elliptic blended or smooth CSG of level sets (docs/method.md#grid-blend) on grids.
 /// @details Inputs are resampled onto the finest one (as csg()). The blend differs from the sharp
 /// operation by more than the tolerance only where two inputs are within blendReach() of each
 /// other near the output band: the crease. So the result is the sharp operation (OpenVDB's csg
@@ -34,9 +39,14 @@ double blendReach(double p, double toleranceWorld);
 /// clipped copy, the values are combined with the same log-sum-exp as the scene-level blend,
 /// estimated as distances f / |grad f| and re-distanced (levelset::redistance) into a narrow band
 /// of the finest input's half width. The cost grows with the crease, not with the band.
-/// @throw openvdb::ValueError for a bad p or tolerance, or fewer than two inputs
+/// @throw ParamError for a bad p, k or tolerance, or fewer than two inputs
 /// @throw openvdb::RuntimeError if the extension would not fit in memory (the message suggests
 /// the scene-level blend), or on interruption
+/// @brief The kernel @a settings ask for: the polynomial smooth minimum if k is nonzero, else the
+/// super-elliptic blend of p.
+/// @throw ParamError for a bad p or k
+implicit::BlendKernel blendKernel(const BlendSettings& settings);
+
 openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,
                               const BlendSettings& settings,
                               std::vector<std::string>* notes = nullptr);

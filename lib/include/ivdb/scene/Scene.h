@@ -6,6 +6,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace ivdb::scene {
 
@@ -15,6 +16,14 @@ class SceneError: public std::runtime_error
 {
 public:
     using std::runtime_error::runtime_error;
+};
+
+/// @brief Settings given outside the scene file (a command line's) that replace the file's:
+/// mesh and vdb nodes are built at the voxel size and band they give.
+struct SceneOverrides
+{
+    std::optional<double> voxelSize;
+    std::optional<double> halfWidth;
 };
 
 /// @brief A parsed scene: the implicit shape and how to rasterize it.
@@ -31,14 +40,22 @@ struct Scene
     bool distanceBound = false;
     /// The scene's JSON text, compact, for the output's metadata.
     std::string json;
+    /// What a user should know about the scene's inputs: a mesh that is not closed, a .vdb
+    /// rebuilt at the scene's voxel size.
+    std::vector<std::string> notes;
 };
 
-/// @brief Parse a scene from JSON text; @a origin names it in error messages (a file path).
-/// @throw SceneError on any invalid content
-Scene parseScene(const std::string& text, const std::string& origin);
+/// @brief Parse a scene from JSON text; @a origin names it in error messages (a file path) and
+/// its folder is where the relative file names of mesh and vdb nodes start.
+/// @details Mesh and vdb nodes read their files and build their level sets here, at the voxel
+/// size of @a overrides or else of the scene, with a band as wide as the blends, offsets and
+/// shells above them need (docs/scene-format.md#mesh).
+/// @throw SceneError on any invalid content, naming the JSON path of the field
+Scene parseScene(const std::string& text, const std::string& origin,
+                 const SceneOverrides& overrides = {});
 
 /// @brief Read and parse a scene file.
 /// @throw SceneError if the file cannot be read or its content is invalid
-Scene loadScene(const std::string& path);
+Scene loadScene(const std::string& path, const SceneOverrides& overrides = {});
 
 } // namespace ivdb::scene

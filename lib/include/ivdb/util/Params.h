@@ -81,6 +81,7 @@ inline constexpr Param kOutput{"output", "output file"};
 inline constexpr Param kGrid{"grid", "grid"};
 inline constexpr Param kStep{"step", "gradient step"};
 inline constexpr Param kBlendP{"p", "blend sharpness p"};
+inline constexpr Param kSmoothK{"k", "smooth width k"};
 inline constexpr Param kTolerance{"tolerance", "blend tolerance"};
 inline constexpr Param kAdaptivity{"adaptivity", "mesh adaptivity"};
 inline constexpr Param kColorBy{"color_by", "colour grid"};
@@ -110,6 +111,10 @@ inline constexpr Limit kStep{param::kStep, 1.0, 20.0, false, false, "voxels"};
 /// Blend sharpness, 1/world units: the blend reaches about ln(2)/p from the crease.
 inline constexpr Limit kBlendP{param::kBlendP, 0.1, 1000.0, false, false, "",
     "(larger is sharper; the blend reaches about ln(2)/p world units from the crease)"};
+/// Width of the polynomial smooth minimum, world units: it changes the sharp result only where
+/// two values are within k of each other.
+inline constexpr Limit kSmoothK{param::kSmoothK, 0.0, kInf, true, false, "world units",
+    "(the smooth CSG differs from the sharp one only where the inputs are within k)"};
 /// Error allowed on a grid blend's surface from the bands' limited reach, in voxels.
 inline constexpr Limit kTolerance{param::kTolerance, 0.0, kInf, true, false, "voxels"};
 /// Mesh adaptivity: 0 keeps every voxel's face, 1 merges flat regions the most.

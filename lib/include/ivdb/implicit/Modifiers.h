@@ -1,0 +1,76 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+
+#include <ivdb/implicit/Implicit.h>
+
+namespace ivdb::implicit {
+
+/// @brief A shape grown (or shrunk) by a distance: f - d.
+/// @details For an exact-distance child and d > 0 the value is the distance outside the grown
+/// shape and a lower bound of it inside (where two parts of the grown surface meet it is not
+/// the distance), so the rasterizer finds the distances (docs/method.md#true-distances).
+class Offset final: public Implicit
+{
+public:
+    /// @throw openvdb::ValueError if @a child is null or @a distance is not finite
+    Offset(Ptr child, double distance);
+
+    double value(const Vec3d& p) const override;
+    Vec3d gradient(const Vec3d& p) const override;
+    void values(const double* x, const double* y, const double* z, double* out,
+                std::size_t n) const override;
+    void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                   double* gz, std::size_t n) const override;
+    /// For an exact SDF child: the point moved along the child's gradient onto the offset
+    /// surface, certified where it lands there (then nothing nearer can be: the child is
+    /// 1-Lipschitz); elsewhere (a sharp edge shrunk, a medial axis grown) the smooth iteration.
+    void footPoints(const double* x, const double* y, const double* z, const double* values,
+                    std::size_t n, const FootQuery& query, FootPoints& out) const override;
+    Interval interval(const BBoxd& box) const override;
+    /// The child's box, grown by d > 0 when the child is exact outside; unbounded for a grown
+    /// child that is not.
+    BBoxd boundingBox() const override;
+    bool isExactSdf() const override { return false; }
+    /// Grown (d >= 0) from a shape exact outside: f - d is the distance outside.
+    bool isExactOutside() const override;
+    Ptr prune(const BBoxd& box) const override;
+    std::string typeName() const override { return "offset"; }
+
+private:
+    Ptr mChild;
+    double mDistance;
+};
+
+/// @brief A hollow shell of a shape, of thickness t centred on its surface: |f| - t/2.
+/// @details The shell's surfaces are the child's offset by t/2 outwards and inwards. The value is
+/// the distance outside the shell for an exact-distance child, and a lower bound inside it.
+class Shell final: public Implicit
+{
+public:
+    /// @throw openvdb::ValueError if @a child is null or @a thickness is not > 0 and finite
+    Shell(Ptr child, double thickness);
+
+    double value(const Vec3d& p) const override;
+    Vec3d gradient(const Vec3d& p) const override;
+    void values(const double* x, const double* y, const double* z, double* out,
+                std::size_t n) const override;
+    void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                   double* gz, std::size_t n) const override;
+    /// As Offset's, on whichever of the two offset surfaces lies on the point's side.
+    void footPoints(const double* x, const double* y, const double* z, const double* values,
+                    std::size_t n, const FootQuery& query, FootPoints& out) const override;
+    Interval interval(const BBoxd& box) const override;
+    /// The child's box grown by t/2 when the child is exact outside, else unbounded.
+    BBoxd boundingBox() const override;
+    bool isExactSdf() const override { return false; }
+    /// For an exact SDF child: both of the shell's surfaces are offsets of the child's.
+    bool isExactOutside() const override { return mChild->isExactSdf(); }
+    Ptr prune(const BBoxd& box) const override;
+    std::string typeName() const override { return "shell"; }
+
+private:
+    Ptr mChild;
+    double mHalf; // t/2
+};
+
+} // namespace ivdb::implicit

@@ -1,0 +1,150 @@
+// SPDX-License-Identifier: Apache-2.0
+#include <ivdb/implicit/GridShape.h>
+
+#include <openvdb/Exceptions.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace ivdb::implicit {
+
+namespace {
+
+// Unregistered: a registered accessor would lock the tree's registry on every call.
+using Accessor = openvdb::tree::ValueAccessor<const openvdb::FloatTree, /*IsSafe=*/false>;
+
+/// The Catmull-Rom weights of the samples at -1, 0, 1, 2 for a point at @a t in [0, 1), and
+/// their derivatives.
+void catmullRom(double t, double w[4], double dw[4])
+{
+    const double t2 = t * t, t3 = t2 * t;
+    w[0] = 0.5 * (-t3 + 2.0 * t2 - t);
+    w[1] = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0);
+    w[2] = 0.5 * (-3.0 * t3 + 4.0 * t2 + t);
+    w[3] = 0.5 * (t3 - t2);
+    dw[0] = 0.5 * (-3.0 * t2 + 4.0 * t - 1.0);
+    dw[1] = 0.5 * (9.0 * t2 - 10.0 * t);
+    dw[2] = 0.5 * (-9.0 * t2 + 8.0 * t + 1.0);
+    dw[3] = 0.5 * (3.0 * t2 - 2.0 * t);
+}
+
+/// The tricubic Catmull-Rom interpolation of the voxels around index-space point @a q (C1, it
+/// passes through every voxel's value), and its gradient per voxel if @a grad is not null.
+/// A point of the lattice (within 1e-9 of integers: p = i dx, whatever p / dx rounds to) is
+/// its voxel's value, and its gradient the central differences there.
+double tricubic(const Accessor& acc, const Vec3d& q, Vec3d* grad)
+{
+    double f[3];
+    int c[3];
+    bool onLattice = true;
+    for (int a = 0; a < 3; ++a) {
+        const double r = std::round(q[a]);
+        if (std::abs(q[a] - r) < 1e-9) {
+            c[a] = int(r);
+            f[a] = 0.0;
+        } else {
+            const double fl = std::floor(q[a]);
+            c[a] = int(fl);
+            f[a] = q[a] - fl;
+            onLattice = false;
+        }
+    }
+    const openvdb::Coord base{c[0], c[1], c[2]};
+    if (onLattice && !grad) return acc.getValue(base);
+    double w[3][4], dw[3][4];
+    for (int a = 0; a < 3; ++a) catmullRom(f[a], w[a], dw[a]);
+    double value = 0.0;
+    Vec3d g(0.0);
+    for (int i = 0; i < 4; ++i) {
+        for (int j = 0; j < 4; ++j) {
+            const double wxy = w[0][i] * w[1][j], dxy = dw[0][i] * w[1][j], xdy = w[0][i] * dw[1][j];
+            if (wxy == 0.0 && dxy == 0.0 && xdy == 0.0) continue;
+            for (int k = 0; k < 4; ++k) {
+                if (w[2][k] == 0.0 && dw[2][k] == 0.0) continue;
+                const double v = acc.getValue(base.offsetBy(i - 1, j - 1, k - 1));
+                value += wxy * w[2][k] * v;
+                g += Vec3d(dxy * w[2][k], xdy * w[2][k], wxy * dw[2][k]) * v;
+            }
+        }
+    }
+    if (grad) *grad = g;
+    return value;
+}
+
+} // namespace
+
+GridShape::GridShape(openvdb::FloatGrid::ConstPtr grid, std::string name)
+    : mGrid(std::move(grid)), mName(std::move(name))
+{
+    if (!mGrid) OPENVDB_THROW(openvdb::ValueError, mName + " shape has no grid");
+    const openvdb::math::Transform& xform = mGrid->transform();
+    mDx = xform.voxelSize()[0];
+    const openvdb::math::Transform::Ptr lattice =
+        openvdb::math::Transform::createLinearTransform(mDx);
+    if (!(xform == *lattice)) {
+        OPENVDB_THROW(openvdb::ValueError, mName + " shape's grid must have voxel centres at "
+                      "integer multiples of its voxel size (resample it first)");
+    }
+    mInvDx = 1.0 / mDx;
+    mBackground = double(mGrid->background());
+    const openvdb::CoordBBox active = mGrid->evalActiveVoxelBoundingBox();
+    if (active.empty()) {
+        mBox = BBoxd(Vec3d(0.0), Vec3d(0.0));
+    } else {
+        const openvdb::Coord lo = active.min().offsetBy(-1), hi = active.max().offsetBy(1);
+        mBox = BBoxd(Vec3d(lo.x(), lo.y(), lo.z()) * mDx, Vec3d(hi.x(), hi.y(), hi.z()) * mDx);
+    }
+}
+
+double GridShape::value(const Vec3d& p) const
+{
+    const Accessor acc(mGrid->tree());
+    return clamp(tricubic(acc, p * mInvDx, nullptr));
+}
+
+Vec3d GridShape::gradient(const Vec3d& p) const
+{
+    const Accessor acc(mGrid->tree());
+    Vec3d g;
+    tricubic(acc, p * mInvDx, &g);
+    return g * mInvDx; // per voxel to per world unit
+}
+
+void GridShape::values(const double* x, const double* y, const double* z, double* out,
+                       std::size_t n) const
+{
+    const Accessor acc(mGrid->tree());
+    for (std::size_t i = 0; i < n; ++i) {
+        out[i] = clamp(tricubic(acc, Vec3d(x[i], y[i], z[i]) * mInvDx, nullptr));
+    }
+}
+
+void GridShape::gradients(const double* x, const double* y, const double* z, double* gx,
+                          double* gy, double* gz, std::size_t n) const
+{
+    const Accessor acc(mGrid->tree());
+    for (std::size_t i = 0; i < n; ++i) {
+        Vec3d g;
+        tricubic(acc, Vec3d(x[i], y[i], z[i]) * mInvDx, &g);
+        gx[i] = g[0] * mInvDx;
+        gy[i] = g[1] * mInvDx;
+        gz[i] = g[2] * mInvDx;
+    }
+}
+
+Interval GridShape::interval(const BBoxd& box) const
+{
+    // The samples change by at most one voxel size per voxel along each axis, so each component
+    // of the interpolation's gradient is at most 1.5 (Catmull-Rom's derivative) times 1.25^2
+    // (the other axes' weights, negative lobes included), its length at most sqrt(3) times
+    // that; the values are clamped to the background.
+    const double v = value(box.getCenter());
+    // (With a margin for the samples' float rounding.)
+    const double lipschitz = std::sqrt(3.0) * 1.5 * 1.25 * 1.25;
+    const double h = lipschitz * 0.5 * (box.max() - box.min()).length() * (1.0 + 1e-4) + 1e-5 * mDx;
+    return {std::max(-mBackground, v - h), std::min(mBackground, v + h)};
+}
+
+BBoxd GridShape::boundingBox() const { return mBox; }
+
+} // namespace ivdb::implicit

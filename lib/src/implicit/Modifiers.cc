@@ -1,0 +1,136 @@
+// SPDX-License-Identifier: Apache-2.0
+#include <ivdb/implicit/Modifiers.h>
+
+#include <openvdb/Exceptions.h>
+
+#include <cmath>
+#include <sstream>
+
+namespace ivdb::implicit {
+
+namespace {
+
+void requireChild(const Implicit::Ptr& child, const char* what)
+{
+    if (!child) OPENVDB_THROW(openvdb::ValueError, std::string(what) + " has a null child");
+}
+
+/// @a box grown by @a d in every direction.
+BBoxd grown(const BBoxd& box, double d) { return BBoxd(box.min() - Vec3d(d), box.max() + Vec3d(d)); }
+
+} // namespace
+
+// ---- Offset ---------------------------------------------------------------------------------
+
+Offset::Offset(Ptr child, double distance): mChild(std::move(child)), mDistance(distance)
+{
+    requireChild(mChild, "offset");
+    if (!std::isfinite(distance)) {
+        std::ostringstream os;
+        os << "offset distance must be finite, got " << distance;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+}
+
+double Offset::value(const Vec3d& p) const { return mChild->value(p) - mDistance; }
+
+Vec3d Offset::gradient(const Vec3d& p) const { return mChild->gradient(p); }
+
+void Offset::values(const double* x, const double* y, const double* z, double* out,
+                    std::size_t n) const
+{
+    mChild->values(x, y, z, out, n);
+    for (std::size_t i = 0; i < n; ++i) out[i] -= mDistance;
+}
+
+void Offset::gradients(const double* x, const double* y, const double* z, double* gx,
+                       double* gy, double* gz, std::size_t n) const
+{
+    mChild->gradients(x, y, z, gx, gy, gz, n);
+}
+
+Interval Offset::interval(const BBoxd& box) const
+{
+    return mChild->interval(box) + (-mDistance);
+}
+
+BBoxd Offset::boundingBox() const
+{
+    const BBoxd box = mChild->boundingBox();
+    if (mDistance <= 0.0) return box; // shrunk: inside the child
+    if (!mChild->isExactOutside() || !isFinite(box)) return infiniteBox();
+    return grown(box, mDistance);
+}
+
+bool Offset::isExactOutside() const { return mDistance >= 0.0 && mChild->isExactOutside(); }
+
+Implicit::Ptr Offset::prune(const BBoxd& box) const
+{
+    Ptr c = mChild->prune(box);
+    if (c == mChild) return shared_from_this();
+    return std::make_shared<Offset>(std::move(c), mDistance);
+}
+
+// ---- Shell ----------------------------------------------------------------------------------
+
+Shell::Shell(Ptr child, double thickness): mChild(std::move(child)), mHalf(0.5 * thickness)
+{
+    requireChild(mChild, "shell");
+    if (!(thickness > 0.0) || !std::isfinite(thickness)) {
+        std::ostringstream os;
+        os << "shell thickness must be > 0 and finite, got " << thickness;
+        OPENVDB_THROW(openvdb::ValueError, os.str());
+    }
+}
+
+double Shell::value(const Vec3d& p) const { return std::abs(mChild->value(p)) - mHalf; }
+
+Vec3d Shell::gradient(const Vec3d& p) const
+{
+    const Vec3d g = mChild->gradient(p);
+    return mChild->value(p) < 0.0 ? -g : g;
+}
+
+void Shell::values(const double* x, const double* y, const double* z, double* out,
+                   std::size_t n) const
+{
+    mChild->values(x, y, z, out, n);
+    for (std::size_t i = 0; i < n; ++i) out[i] = std::abs(out[i]) - mHalf;
+}
+
+void Shell::gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                      double* gz, std::size_t n) const
+{
+    double v[kMaxBatch];
+    mChild->values(x, y, z, v, n);
+    mChild->gradients(x, y, z, gx, gy, gz, n);
+    for (std::size_t i = 0; i < n; ++i) {
+        if (v[i] < 0.0) gx[i] = -gx[i], gy[i] = -gy[i], gz[i] = -gz[i];
+    }
+}
+
+Interval Shell::interval(const BBoxd& box) const
+{
+    const Interval c = mChild->interval(box);
+    Interval a;
+    if (c.lo >= 0.0) a = c;
+    else if (c.hi <= 0.0) a = -c;
+    else a = Interval(0.0, std::max(-c.lo, c.hi));
+    return a + (-mHalf);
+}
+
+BBoxd Shell::boundingBox() const
+{
+    const BBoxd box = mChild->boundingBox();
+    if (!mChild->isExactOutside() || !isFinite(box)) return infiniteBox();
+    return grown(box, mHalf);
+}
+
+Implicit::Ptr Shell::prune(const BBoxd& box) const
+{
+    Ptr c = mChild->prune(box);
+    if (c == mChild) return shared_from_this();
+    return std::make_shared<Shell>(std::move(c), 2.0 * mHalf);
+}
+
+} // namespace ivdb::implicit
