@@ -205,7 +205,8 @@ TEST_F(TestShapes, PrimitivesAreTheirClosedForms)
     expectShape(cylinder, [&](const Vec3d& p) { return capsuleCylinderReference(p, a, b, 0.2); },
                 dx, "capped_cylinder");
 
-    for (auto [ra, rb] : {std::pair{0.25, 0.1}, std::pair{0.0, 0.3}, std::pair{0.15, 0.32}}) {
+    for (const auto& radii : {std::pair{0.25, 0.1}, std::pair{0.0, 0.3}, std::pair{0.15, 0.32}}) {
+        const double ra = radii.first, rb = radii.second; // (lambdas cannot capture bindings)
         auto cone = std::make_shared<implicit::CappedCone>(a, b, ra, rb);
         const std::string what = "capped_cone " + std::to_string(ra) + " " + std::to_string(rb);
         expectContract(*cone, implicit::BBoxd(Vec3d(-0.6), Vec3d(0.6)), what);
