@@ -29,7 +29,13 @@ Section "io" (.vdb reading and writing, issue 15):
     rasterize, gradient, curvature and csg union at radius 400 and rasterize at radius 1600,
     ivdb with --threads 1 and 2, interleaved;
   * rasterize's compute at radius 1600 against 16x its compute at radius 400.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|all]
+Section "mesh" (a mesh as a scene, issue 17):
+  * `ivdb rasterize` of a scene holding only data/meshes/knot.obj (voxel size 0.002) vs the same
+    in pyopenvdb (the OBJ read in Python, FloatGrid.createLevelSetFromPolygons, i.e. OpenVDB's
+    meshToLevelSet, written to a .vdb): compute (each one's own figure) and wall time;
+  * `ivdb rasterize data/knot_smooth.json` (the mesh smooth-unioned with implicit shapes):
+    compute, and how the true distances were found.
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|all]
 [--reps N] [--quick]
 """
 import argparse
@@ -85,7 +91,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
-    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "all"],
+    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "mesh", "all"],
                     default="all")
     args = ap.parse_args()
     reps = 3 if args.quick else args.reps
@@ -103,6 +109,69 @@ def main():
             bench_distances(tmp, reps, args.quick)
         if args.section in ("io", "all"):
             bench_io(tmp, big, reps, args.quick)
+        if args.section in ("mesh", "all"):
+            bench_mesh(tmp, reps)
+
+
+MESH_TO_LEVEL_SET = """
+import sys, time, numpy, pyopenvdb as vdb
+points, triangles = [], []
+t0 = time.perf_counter()
+for line in open(sys.argv[1]):
+    f = line.split()
+    if f and f[0] == "v": points.append([float(x) for x in f[1:4]])
+    elif f and f[0] == "f": triangles.append([int(x) - 1 for x in f[1:4]])
+t1 = time.perf_counter()
+g = vdb.FloatGrid.createLevelSetFromPolygons(numpy.array(points, dtype=numpy.float32),
+    triangles=numpy.array(triangles, dtype=numpy.uint32),
+    transform=vdb.createLinearTransform(float(sys.argv[2])), halfWidth=3.0)
+t2 = time.perf_counter()
+g.name = "surface"
+vdb.write(sys.argv[3], grids=[g])
+print("compute %.4f read %.4f voxels %d" % (t2 - t1, t1 - t0, g.activeVoxelCount()))
+"""
+
+
+def bench_mesh(tmp, reps):
+    obj = os.path.join(ROOT, "data", "meshes", "knot.obj")
+    scene = os.path.join(tmp, "knot.json")
+    with open(scene, "w") as f:
+        json.dump({"voxel_size": 0.002, "shape": {"type": "mesh", "file": obj}}, f)
+    script = os.path.join(tmp, "m2l.py")
+    with open(script, "w") as f:
+        f.write(MESH_TO_LEVEL_SET)
+    cmds = {"ivdb": [IVDB, "rasterize", scene, "-o", os.path.join(tmp, "k1.vdb")],
+            "openvdb": ["/usr/bin/python3", script, obj, "0.002", os.path.join(tmp, "k2.vdb")]}
+    compute = {"ivdb": [], "openvdb": []}
+    walls = {"ivdb": [], "openvdb": []}
+    for _ in range(reps):
+        for k, cmd in cmds.items():
+            t0 = time.perf_counter()
+            out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+            walls[k].append(time.perf_counter() - t0)
+            word = "compute"
+            fields = out.replace(",", " ").split()
+            compute[k].append(float(fields[fields.index(word) + 1]))
+    c = {k: statistics.median(v) for k, v in compute.items()}
+    w = {k: statistics.median(v) for k, v in walls.items()}
+    print("| data/meshes/knot.obj (7680 triangles), voxel 0.002 | ivdb rasterize | pyopenvdb meshToLevelSet | ratio |")
+    print("|---|---|---|---|")
+    print(f"| compute (ivdb: reading the mesh included) | {c['ivdb']:.2f} s | {c['openvdb']:.2f} s | "
+          f"**{c['ivdb'] / c['openvdb']:.2f}x the time** |")
+    print(f"| wall time (read, compute, write) | {w['ivdb']:.2f} s | {w['openvdb']:.2f} s | "
+          f"**{w['ivdb'] / w['openvdb']:.2f}x the time** |\n")
+    # The mesh in a smooth union (data/knot_smooth.json): compute, and how its distances were found.
+    smooth = os.path.join(ROOT, "data", "knot_smooth.json")
+    times, lines = [], ""
+    for _ in range(reps):
+        res = subprocess.run([IVDB, "rasterize", smooth, "-o", os.path.join(tmp, "ks.vdb")],
+                             check=True, capture_output=True, text=True)
+        fields = res.stdout.replace(",", " ").split()
+        times.append(float(fields[fields.index("compute") + 1]))
+        voxels = int(fields[1])
+        lines = res.stdout.strip().splitlines()[-1].strip()
+    print(f"data/knot_smooth.json: {voxels} active voxels, compute {statistics.median(times):.2f} s "
+          f"(median of {reps}); {lines}\n")
 
 
 def gbench_medians(pattern, reps):

@@ -90,23 +90,42 @@ GridShape::GridShape(openvdb::FloatGrid::ConstPtr grid, std::string name)
     const openvdb::CoordBBox active = mGrid->evalActiveVoxelBoundingBox();
     if (active.empty()) {
         mBox = BBoxd(Vec3d(0.0), Vec3d(0.0));
+        mIndexLo = Vec3d(1.0); // every point far
+        mIndexHi = Vec3d(-1.0);
     } else {
+        // Every node the tree stores (inside tiles too); beyond them it holds its background.
+        openvdb::CoordBBox stored;
+        mGrid->tree().getIndexRange(stored);
+        mIndexLo = Vec3d(stored.min().x(), stored.min().y(), stored.min().z()) - Vec3d(3.0);
+        mIndexHi = Vec3d(stored.max().x(), stored.max().y(), stored.max().z()) + Vec3d(3.0);
         const openvdb::Coord lo = active.min().offsetBy(-1), hi = active.max().offsetBy(1);
         mBox = BBoxd(Vec3d(lo.x(), lo.y(), lo.z()) * mDx, Vec3d(hi.x(), hi.y(), hi.z()) * mDx);
     }
 }
 
+bool GridShape::far(const Vec3d& q) const
+{
+    // Beyond the tree's nodes (and the interpolation's reach) the grid holds only its outside
+    // background: a test that also keeps huge coordinates out of the integer conversions.
+    return !(q[0] >= mIndexLo[0] && q[0] <= mIndexHi[0] && q[1] >= mIndexLo[1] &&
+             q[1] <= mIndexHi[1] && q[2] >= mIndexLo[2] && q[2] <= mIndexHi[2]);
+}
+
 double GridShape::value(const Vec3d& p) const
 {
+    const Vec3d q = p * mInvDx;
+    if (far(q)) return mBackground;
     const Accessor acc(mGrid->tree());
-    return clamp(tricubic(acc, p * mInvDx, nullptr));
+    return clamp(tricubic(acc, q, nullptr));
 }
 
 Vec3d GridShape::gradient(const Vec3d& p) const
 {
+    const Vec3d q = p * mInvDx;
+    if (far(q)) return Vec3d(0.0);
     const Accessor acc(mGrid->tree());
     Vec3d g;
-    tricubic(acc, p * mInvDx, &g);
+    tricubic(acc, q, &g);
     return g * mInvDx; // per voxel to per world unit
 }
 
@@ -115,7 +134,8 @@ void GridShape::values(const double* x, const double* y, const double* z, double
 {
     const Accessor acc(mGrid->tree());
     for (std::size_t i = 0; i < n; ++i) {
-        out[i] = clamp(tricubic(acc, Vec3d(x[i], y[i], z[i]) * mInvDx, nullptr));
+        const Vec3d q = Vec3d(x[i], y[i], z[i]) * mInvDx;
+        out[i] = far(q) ? mBackground : clamp(tricubic(acc, q, nullptr));
     }
 }
 
@@ -124,8 +144,9 @@ void GridShape::gradients(const double* x, const double* y, const double* z, dou
 {
     const Accessor acc(mGrid->tree());
     for (std::size_t i = 0; i < n; ++i) {
-        Vec3d g;
-        tricubic(acc, Vec3d(x[i], y[i], z[i]) * mInvDx, &g);
+        const Vec3d q = Vec3d(x[i], y[i], z[i]) * mInvDx;
+        Vec3d g(0.0);
+        if (!far(q)) tricubic(acc, q, &g);
         gx[i] = g[0] * mInvDx;
         gy[i] = g[1] * mInvDx;
         gz[i] = g[2] * mInvDx;

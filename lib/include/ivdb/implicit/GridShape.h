@@ -47,12 +47,16 @@ public:
     double bandWidth() const { return mBackground; }
 
 private:
+    /// True if index-space point @a q is beyond every node the tree stores and the
+    /// interpolation's reach: there the value is the background.
+    bool far(const Vec3d& q) const;
     double clamp(double v) const { return std::max(-mBackground, std::min(mBackground, v)); }
 
     openvdb::FloatGrid::ConstPtr mGrid;
     std::string mName;
     double mDx, mInvDx, mBackground;
     BBoxd mBox;
+    Vec3d mIndexLo, mIndexHi; // the tree's index range, grown by three voxels
 };
 
 } // namespace ivdb::implicit
