@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../TempDirTest.h"
+
 #include <atomic>
 #include <cstring>
 #include <filesystem>
@@ -55,26 +57,11 @@ void expectSameVoxels(const GridT& source, const nanovdb::GridHandle<nanovdb::Ho
     EXPECT_EQ(differ, 0u) << what << ": voxels that differ, of " << voxels;
 }
 
-class TestNanoVdb: public ::testing::Test
+class TestNanoVdb: public ivdb::test::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() /
-               ("ivdb-test-nanovdb-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-    std::string path(const std::string& name) const { return (mDir / name).string(); }
+    TestNanoVdb(): TempDirTest("nanovdb") {}
 
-    fs::path mDir;
 };
 
 TEST_F(TestNanoVdb, EveryActiveVoxelAsTheSource)

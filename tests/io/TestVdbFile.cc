@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../TempDirTest.h"
+
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
@@ -29,26 +31,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class TestVdbFile: public ::testing::Test
+class TestVdbFile: public ivdb::test::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() /
-               ("ivdb-test-io-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-
-    std::string path(const std::string& name) const { return (mDir / name).string(); }
+    TestVdbFile(): TempDirTest("io") {}
 
     static openvdb::FloatGrid::Ptr makeSphere(float radius = 1.0f, float voxel = 0.05f)
     {
@@ -176,7 +162,6 @@ protected:
         }
     }
 
-    fs::path mDir;
 };
 
 TEST_F(TestVdbFile, RoundTrip)

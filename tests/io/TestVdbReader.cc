@@ -13,6 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../TempDirTest.h"
+
 #include <atomic>
 #include <cstring>
 #include <filesystem>
@@ -70,24 +72,10 @@ std::size_t leavesNotLoaded(const openvdb::GridPtrVec& grids)
     return n;
 }
 
-class TestVdbReader: public ::testing::Test
+class TestVdbReader: public ivdb::test::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() /
-               ("ivdb-test-reader-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-    std::string path(const std::string& name) const { return (mDir / name).string(); }
+    TestVdbReader(): TempDirTest("reader") {}
 
     /// Write @a grids with OpenVDB's io::File and the compression flags @a flags.
     std::string writeWithOpenVdb(const openvdb::GridCPtrVec& grids, std::uint32_t flags,
@@ -144,7 +132,6 @@ protected:
         }
     }
 
-    fs::path mDir;
 };
 
 /// Copies of @a grids flagged to be written as half floats.

@@ -12,6 +12,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../TempDirTest.h"
+
 #include <atomic>
 #include <cmath>
 #include <filesystem>
@@ -27,24 +29,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class TestVdbWriter: public ::testing::Test
+class TestVdbWriter: public ivdb::test::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() /
-               ("ivdb-test-writer-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-    std::string path(const std::string& name) const { return (mDir / name).string(); }
+    TestVdbWriter(): TempDirTest("writer") {}
 
     static std::string bytes(const std::string& file)
     {
@@ -86,7 +74,6 @@ protected:
         f.close();
     }
 
-    fs::path mDir;
 };
 
 using ivdb::test::sphere;

@@ -20,6 +20,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../TempDirTest.h"
+
 #include <algorithm>
 #include <atomic>
 #include <filesystem>
@@ -35,26 +37,10 @@ namespace {
 namespace fs = std::filesystem;
 using namespace ivdb;
 
-class TestJobs: public ::testing::Test
+class TestJobs: public ivdb::test::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        static std::atomic<int> counter{0};
-        mDir = fs::temp_directory_path() /
-               ("ivdb-test-jobs-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-        fs::remove_all(mDir);
-        fs::create_directories(mDir);
-    }
-
-    void TearDown() override
-    {
-        std::error_code ec;
-        fs::remove_all(mDir, ec);
-    }
-
-    std::string path(const std::string& name) const { return (mDir / name).string(); }
+    TestJobs(): TempDirTest("jobs") {}
 
     static std::string data(const std::string& name) { return std::string(IVDB_DATA_DIR) + "/" + name; }
 
@@ -113,7 +99,6 @@ protected:
         }
     }
 
-    fs::path mDir;
 };
 
 TEST_F(TestJobs, RasterizeWritesWhatTheRasterizerMakes)

@@ -18,6 +18,8 @@
 
 #include <gtest/gtest.h>
 
+#include "../TempDirTest.h"
+
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -35,18 +37,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class TestAssets: public ::testing::Test
+class TestAssets: public ivdb::test::TempDirTest
 {
 protected:
-    void SetUp() override
-    {
-        openvdb::initialize();
-        mDir = fs::temp_directory_path() / ("ivdb_assets_" + std::to_string(::getpid()));
-        fs::create_directories(mDir);
-    }
-    void TearDown() override { fs::remove_all(mDir); }
-
-    std::string path(const std::string& name) const { return (mDir / name).string(); }
+    TestAssets(): TempDirTest("assets") {}
 
     /// A scene file in the test folder holding @a shape (JSON), at voxel size @a dx.
     scene::Scene scene(const std::string& shape, double dx) const
@@ -56,8 +50,6 @@ protected:
         std::ofstream(path("scene.json")) << os.str();
         return scene::loadScene(path("scene.json"));
     }
-
-    fs::path mDir;
 };
 
 using Triangles = std::vector<std::array<Vec3d, 3>>;
