@@ -149,9 +149,8 @@ def bench_mesh(tmp, reps):
             t0 = time.perf_counter()
             out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
             walls[k].append(time.perf_counter() - t0)
-            word = "compute"
             fields = out.replace(",", " ").split()
-            compute[k].append(float(fields[fields.index(word) + 1]))
+            compute[k].append(float(fields[fields.index("compute") + 1]))
     c = {k: statistics.median(v) for k, v in compute.items()}
     w = {k: statistics.median(v) for k, v in walls.items()}
     print("| data/meshes/knot.obj (7680 triangles), voxel 0.002 | ivdb rasterize | pyopenvdb meshToLevelSet | ratio |")

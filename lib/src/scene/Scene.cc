@@ -364,8 +364,9 @@ std::string inputFile(ObjectReader& r, const Node& node)
 /// What a mesh or vdb node is built at: the scene's voxel size, and a half width (voxels) of the
 /// node's band (widened by at most kMaxExtraBand voxels beyond the raster's half width for the
 /// blends above) plus a margin: none for the whole scene (then a mesh's grid is exactly
-/// OpenVDB's meshToLevelSet at the raster's half width), a voxel for the gradients a CSG reads,
-/// two for interpolation under a transform.
+/// OpenVDB's meshToLevelSet at the raster's half width), two inside a tree (the rasterizer asks
+/// for distances a voxel beyond the band, and the edge value must lie beyond that), three under
+/// a transform (its interpolation between voxels).
 constexpr double kMaxExtraBand = 64.0;
 
 struct GridBuild
