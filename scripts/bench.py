@@ -35,7 +35,7 @@ Section "mesh" (a mesh as a scene, issue 17):
     meshToLevelSet, written to a .vdb): compute (each one's own figure) and wall time;
   * `ivdb rasterize data/knot_smooth.json` (the mesh smooth-unioned with implicit shapes):
     compute, and how the true distances were found.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|all]
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|sequence|all]
 [--reps N] [--quick]
 """
 import argparse
@@ -91,7 +91,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
-    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "mesh", "all"],
+    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "mesh", "sequence", "all"],
                     default="all")
     args = ap.parse_args()
     reps = 3 if args.quick else args.reps
@@ -111,6 +111,8 @@ def main():
             bench_io(tmp, big, reps, args.quick)
         if args.section in ("mesh", "all"):
             bench_mesh(tmp, reps)
+        if args.section in ("sequence", "all"):
+            bench_sequence(tmp, reps)
 
 
 MESH_TO_LEVEL_SET = """
@@ -171,6 +173,40 @@ def bench_mesh(tmp, reps):
         lines = res.stdout.strip().splitlines()[-1].strip()
     print(f"data/knot_smooth.json: {voxels} active voxels, compute {statistics.median(times):.2f} s "
           f"(median of {reps}); {lines}\n")
+
+
+def bench_sequence(tmp, reps):
+    """Sequences: frames one at a time vs several at once, and a shell loop of vdb_tool."""
+    grow = os.path.join(tmp, "grow.json")
+    frames, r0, r1 = 24, 0.5, 0.8
+    with open(grow, "w") as f:
+        json.dump({"voxel_size": 0.004, "frames": {"start": 1, "end": frames},
+                   "shape": {"type": "sphere", "radius": {"keys": [[1, r0], [frames, r1]]}}}, f)
+    radii = [r0 + (r1 - r0) * (k - 1) / (frames - 1) for k in range(1, frames + 1)]
+    loop = "; ".join(f"vdb_tool -sphere voxel=0.004 radius={r:.6f} -write {tmp}/t_{k}.vdb"
+                     for k, r in enumerate(radii))
+    metaballs = os.path.join(ROOT, "data", "anim_metaballs.json")
+    out = os.path.join(tmp, "s_####.vdb")
+    cmds = {
+        "grow_1": [IVDB, "rasterize", grow, "-o", out, "--parallel-frames", "1", "-q"],
+        "grow_auto": [IVDB, "rasterize", grow, "-o", out, "-q"],
+        "grow_vdb_tool": ["sh", "-c", loop],
+        "meta_1": [IVDB, "rasterize", metaballs, "--frames", "1-48:2", "-o", out,
+                   "--parallel-frames", "1", "-q"],
+        "meta_auto": [IVDB, "rasterize", metaballs, "--frames", "1-48:2", "-o", out, "-q"],
+    }
+    t, m = median_runs(cmds, reps)
+    print(f"| 24 frames | one frame at a time | frames at once (default) | speed-up | peak memory |")
+    print("|---|---|---|---|---|")
+    print(f"| growing sphere, voxel 0.004 (1.2-3 M voxels a frame) | {t['grow_1']:.2f} s | "
+          f"{t['grow_auto']:.2f} s | **{t['grow_1'] / t['grow_auto']:.2f}x** | "
+          f"{m['grow_1']:.0f} / {m['grow_auto']:.0f} MB |")
+    print(f"| data/anim_metaballs.json, frames 1-48:2 (blend, 0.5 M voxels a frame) | "
+          f"{t['meta_1']:.2f} s | {t['meta_auto']:.2f} s | **{t['meta_1'] / t['meta_auto']:.2f}x** | "
+          f"{m['meta_1']:.0f} / {m['meta_auto']:.0f} MB |")
+    print(f"\nThe growing sphere by a shell loop of `vdb_tool -sphere ... -write`, one process a "
+          f"frame: {t['grow_vdb_tool']:.2f} s; ivdb is **{t['grow_vdb_tool'] / t['grow_auto']:.2f}x "
+          f"faster**.\n")
 
 
 def gbench_medians(pattern, reps):

@@ -7,7 +7,9 @@
 # meshes of that difference coloured by its mean curvature (HSV over [-50, 50]) and of the
 # blended union (data/fig5_blend_union), gradient arrows on a sphere, a Blender-ready --fog copy of the
 # blended union, and the gallery (docs/gallery.md): the figures rendered into out/*.png (with
-# data/knot_smooth.json, a mesh smooth-unioned with implicit shapes).
+# data/knot_smooth.json, a mesh smooth-unioned with implicit shapes); and the animated metaballs
+# (data/anim_metaballs.json) as a 48-frame sequence out/anim/metaballs_####.vdb that Blender
+# plays, with a contact sheet of 8 frames coloured by mean curvature (out/anim_metaballs_sheet.png).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
@@ -15,6 +17,7 @@ scripts/build.sh
 ivdb=build/bin/ivdb
 mkdir -p out
 for scene in data/*.json; do
+  case "$scene" in data/anim_*) continue ;; esac # sequences, below
   "$ivdb" rasterize "$scene" -o "out/$(basename "$scene" .json).vdb"
 done
 "$ivdb" rasterize data/inputs/sphere_left.json -o out/sphere_left.vdb -q
@@ -39,3 +42,12 @@ done
 "$ivdb" render out/sphere.vdb -o out/fig3_sphere_gradient.png --color-by out/sphere_gradient.vdb -q
 "$ivdb" render out/fig1_difference.vdb -o out/fig4_difference_curvature.png \
   --color-by out/fig1_difference_curvature.vdb:curvature --colormap hsv --range=-50,50 -q
+# The animation: every frame, then the mean curvature of the 8 frames on the contact sheet.
+mkdir -p out/anim
+"$ivdb" rasterize data/anim_metaballs.json -o out/anim/metaballs_####.vdb
+for f in 0001 0007 0013 0019 0025 0031 0037 0043; do
+  "$ivdb" curvature "out/anim/metaballs_$f.vdb" -o "out/anim/curvature_$f.vdb" -q
+done
+"$ivdb" render out/anim/metaballs_####.vdb --frames 1-43:6 --columns 4 --size 320x240 \
+  --color-by out/anim/curvature_####.vdb:curvature --colormap coolwarm --range=-2,2 \
+  -o out/anim_metaballs_sheet.png

@@ -3,10 +3,13 @@
 
 Run as `blender -b --factory-startup --python blender_check.py -- JOB.json RESULT.json`.
 JOB.json is {"imports": [PATH, ...], "meshes": [{"file", "grid", "threshold"}, ...],
-"render": {"file", "grid", "size", "samples", "output"} or null}. RESULT.json gets, per import,
-the object type and the grids Blender sees; per mesh, the Volume to Mesh modifier's mesh (vertex
-and face counts, enclosed volume, bounding box); for the render, the engine and how many pixels
-the volume covers. The assertions are in test_blender.py: this script only measures, and any
+"sequences": [{"file", "grid", "frames"}, ...], "render": {"file", "grid", "size", "samples",
+"output"} or null}. RESULT.json gets, per import, the object type and the grids Blender sees; per
+mesh, the Volume to Mesh modifier's mesh (vertex and face counts, enclosed volume, bounding box);
+per sequence (imported from one of its files with frame-sequence detection, as File > Import >
+OpenVDB does by default), the objects added, the sequence's frame range, and at each of the
+given scene frames the file Blender loads and its Volume to Mesh measures; for the render, the
+engine and how many pixels the volume covers. The assertions are in test_blender.py: this script only measures, and any
 exception is written to RESULT.json as "error".
 """
 
@@ -29,12 +32,12 @@ def clearScene():
         bpy.data.meshes.remove(mesh)
 
 
-def importVolume(path):
-    """File > Import > OpenVDB, as one file (no frame-sequence detection)."""
+def importVolume(path, sequence=False):
+    """File > Import > OpenVDB, as one file (no frame-sequence detection) unless @a sequence."""
     before = set(bpy.data.objects)
     bpy.ops.object.volume_import(
         filepath=path, directory=os.path.dirname(path),
-        files=[{"name": os.path.basename(path)}], use_sequence_detection=False)
+        files=[{"name": os.path.basename(path)}], use_sequence_detection=sequence)
     added = [o for o in bpy.data.objects if o not in before]
     if len(added) != 1:
         raise RuntimeError(f"{path}: volume_import added {len(added)} objects")
@@ -71,9 +74,9 @@ def meshVolume(mesh):
     return volume
 
 
-def volumeToMesh(job):
+def volumeToMesh(job, volumeObj=None):
     """A mesh object with the Volume to Mesh modifier on the imported volume, evaluated."""
-    volumeObj = importVolume(job["file"])
+    volumeObj = volumeObj or importVolume(job["file"])
     mesh = bpy.data.meshes.new("v2m")
     meshObj = bpy.data.objects.new("v2m", mesh)
     bpy.context.scene.collection.objects.link(meshObj)
@@ -95,6 +98,24 @@ def volumeToMesh(job):
         "bbox_max": [max(c[i] for c in coords) for i in range(3)] if coords else None,
     }
     evaluated.to_mesh_clear()
+    return result
+
+
+def describeSequence(job):
+    """One import of a frame sequence, then Volume to Mesh at each of the job's frames."""
+    before = len(bpy.data.objects)
+    volumeObj = importVolume(job["file"], sequence=True)
+    volume = volumeObj.data
+    result = {"file": job["file"], "objects_added": len(bpy.data.objects) - before,
+              "object_type": volumeObj.type, "is_sequence": bool(volume.is_sequence),
+              "frame_start": volume.frame_start, "frame_duration": volume.frame_duration,
+              "frames": []}
+    for frame in job["frames"]:
+        bpy.context.scene.frame_set(frame)
+        measured = volumeToMesh(job, volumeObj)
+        measured["scene_frame"] = frame
+        measured["frame_filepath"] = bpy.path.abspath(volume.grids.frame_filepath)
+        result["frames"].append(measured)
     return result
 
 
@@ -161,7 +182,7 @@ def main():
     with open(jobPath) as f:
         job = json.load(f)
     result = {"blender_version": bpy.app.version_string, "imports": [], "meshes": [],
-              "render": None}
+              "sequences": [], "render": None}
     try:
         for path in job.get("imports", []):
             clearScene()
@@ -169,6 +190,9 @@ def main():
         for meshJob in job.get("meshes", []):
             clearScene()
             result["meshes"].append(volumeToMesh(meshJob))
+        for sequenceJob in job.get("sequences", []):
+            clearScene()
+            result["sequences"].append(describeSequence(sequenceJob))
         if job.get("render"):
             result["render"] = renderFog(job["render"])
     except Exception:  # reported to the test, which fails with it

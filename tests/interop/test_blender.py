@@ -37,6 +37,28 @@ VOLUME_SHAPES = {
 
 BLENDER_TYPES = {"float": "FLOAT", "vec3s": "VECTOR_FLOAT"}
 
+# An animated scene whose volume has a closed form at every frame: two spheres of radius R whose
+# centres (at +-s on x) approach linearly from 1.2 apart (disjoint) to coincident over 5 frames.
+SEQ_R = 0.5
+SEQ_FRAMES = 5
+SEQUENCE_SCENE = {
+    "voxel_size": 0.0125,
+    "frames": {"start": 1, "end": SEQ_FRAMES},
+    "shape": {"type": "union", "children": [
+        {"type": "sphere", "radius": SEQ_R,
+         "center": {"keys": [[1, [-0.6, 0, 0]], [SEQ_FRAMES, [0, 0, 0]]]}},
+        {"type": "sphere", "radius": SEQ_R,
+         "center": {"keys": [[1, [0.6, 0, 0]], [SEQ_FRAMES, [0, 0, 0]]]}}]},
+}
+SEQ_CHECKED = [1, 3, 4]
+
+
+def unionOfTwoBalls(r, d):
+    """Volume of the union of two balls of radius r whose centres are d apart."""
+    ball = 4.0 / 3.0 * math.pi * r ** 3
+    lens = math.pi * (4 * r + d) * (2 * r - d) ** 2 / 12 if d < 2 * r else 0.0
+    return 2 * ball - lens
+
 
 class BlenderOpensIvdbFiles(ic.TempDirTestCase):
 
@@ -55,10 +77,16 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
         fog = cls.outputs["rasterize_fog"][0]
         info = ic.ivdbInfo(fog)["grids"][0]["world_bbox"]
         cls.empties = ic.makeEmptyGridFile(cls.tmp)
+        os.makedirs(cls.path("seq"))
+        ic.ivdb("rasterize", ic.writeJson(cls.path("seq.json"), SEQUENCE_SCENE), "-o",
+                cls.path("seq/balls_####.vdb"), "-q")
+        cls.sequenceFirst = cls.path("seq/balls_0001.vdb")
         job = {
             "imports": [path for path, _ in cls.outputs.values()] + list(cls.empties.values()),
             "meshes": [{"file": path, "grid": "surface", "threshold": 0.0}
                        for path, _, _ in cls.shapes.values()],
+            "sequences": [{"file": cls.sequenceFirst, "grid": "surface", "threshold": 0.0,
+                           "frames": SEQ_CHECKED}],
             "render": {"file": fog, "grid": "density", "size": 64, "samples": 4,
                        "output": cls.path("fog.png"), "bbox_min": info["min"],
                        "bbox_max": info["max"]},
@@ -122,6 +150,28 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
                 # voxel along each axis, to align it with its voxel display)
                 for lo, hi in zip(r["bbox_min"], r["bbox_max"]):
                     self.assertLess(abs((lo + hi) / 2), dx)
+
+    def testSequenceImportsAsOneVolumeThatPlaysTheFrames(self):
+        """The frames of a keyed scene import as one Volume object with the sequence's frame
+        range; at three scene frames Blender loads that frame's file, and its Volume to Mesh
+        encloses the closed-form volume of the union at that frame within 0.5%."""
+        r = self.result["sequences"][0]
+        self.assertEqual(r["objects_added"], 1)
+        self.assertEqual(r["object_type"], "VOLUME")
+        self.assertTrue(r["is_sequence"])
+        self.assertEqual(r["frame_start"], 1)
+        self.assertEqual(r["frame_duration"], SEQ_FRAMES)
+        for m in r["frames"]:
+            frame = m["scene_frame"]
+            with self.subTest(frame=frame):
+                self.assertEqual(os.path.realpath(m["frame_filepath"]),
+                                 os.path.realpath(self.path(f"seq/balls_{frame:04d}.vdb")))
+                s = 0.6 * (SEQ_FRAMES - frame) / (SEQ_FRAMES - 1)
+                volume = unionOfTwoBalls(SEQ_R, 2 * s)
+                error = (abs(m["volume"]) - volume) / volume
+                self.assertLess(abs(error), VOLUME_TOL,
+                                f"frame {frame}: Blender's mesh encloses {m['volume']:.6f}, "
+                                f"analytic {volume:.6f} ({100 * error:+.3f}%)")
 
     def testFogRendersInCycles(self):
         r = self.result["render"]

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <iostream>
 
@@ -32,11 +33,17 @@ std::atomic<bool> gInterrupted{false};
 volatile std::sig_atomic_t gCooperative = 0;
 volatile std::sig_atomic_t gSignal = 0;
 
+// The message an interruption prints, swapped whole (the handler reads it): two buffers so a
+// new note is complete before the handler can see it.
+constexpr std::size_t kNoteSize = 256;
+char gNotes[2][kNoteSize] = {"ivdb: error: interrupted; nothing was written\n"};
+std::atomic<const char*> gInterruptedMessage{gNotes[0]};
+
 [[noreturn]] void exitOnSignal(int sig)
 {
     io::removePendingTemporaryFile();
-    static const char msg[] = "ivdb: error: interrupted; nothing was written\n";
-    [[maybe_unused]] const ssize_t n = ::write(2, msg, sizeof(msg) - 1);
+    const char* msg = gInterruptedMessage.load();
+    [[maybe_unused]] const ssize_t n = ::write(2, msg, std::strlen(msg));
     ::_exit(128 + sig);
 }
 
@@ -126,6 +133,19 @@ bool Progress::wasInterrupted(int percent)
         std::fflush(stderr);
     }
     return gInterrupted.load();
+}
+
+void Progress::clearLine()
+{
+    if (mTerminal && mLastPercent.load() >= 0) std::fprintf(stderr, "\r\033[K");
+    std::fflush(stderr);
+}
+
+void setInterruptedNote(const std::string& note)
+{
+    char* next = gInterruptedMessage.load() == gNotes[0] ? gNotes[1] : gNotes[0];
+    std::snprintf(next, kNoteSize, "ivdb: error: interrupted; %s\n", note.c_str());
+    gInterruptedMessage = next;
 }
 
 void printNotes(const std::vector<std::string>& notes, const std::vector<std::string>& warnings)
@@ -238,7 +258,7 @@ int run(int argc, char** argv)
         return action ? action() : 2;
     } catch (const std::exception& e) {
         if (gInterrupted.load()) {
-            std::cerr << "ivdb: error: interrupted; nothing was written" << std::endl;
+            std::cerr << gInterruptedMessage.load() << std::flush;
             return 128 + gSignal;
         }
         std::cerr << "ivdb: error: " << errorMessage(e) << std::endl;

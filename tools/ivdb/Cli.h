@@ -92,12 +92,18 @@ public:
     void start(const char* name = nullptr) override;
     void end() override;
     bool wasInterrupted(int percent = -1) override;
+    /// @brief Clear the progress line (on a terminal) so a summary line can be printed.
+    void clearLine();
 
 private:
     std::string mLabel;
     bool mTerminal;
     std::atomic<int> mLastPercent{-1}; // called from TBB workers at once
 };
+
+/// @brief What an interruption says was written (default "nothing was written"): a sequence
+/// sets it after each frame. Read by the signal handler: set it outside long operations.
+void setInterruptedNote(const std::string& note);
 
 /// @brief Print `ivdb: warning: <what>` for each warning and `ivdb: note: <what>` for each note.
 void printNotes(const std::vector<std::string>& notes, const std::vector<std::string>& warnings = {});

@@ -2,6 +2,7 @@
 // ivdb render: a ray-traced, shaded image of a level set's surface (PNG or EXR).
 #include "Cli.h"
 
+#include <ivdb/jobs/ContactSheet.h>
 #include <ivdb/jobs/Visualize.h>
 
 #include <cmath>
@@ -15,7 +16,8 @@ namespace {
 struct RenderArgs
 {
     jobs::RenderOptions job;
-    std::string size = "640x480", camera, colormap = "hsv", range;
+    std::string size = "640x480", camera, colormap = "hsv", range, frames;
+    int columns = 4;
     bool colormapGiven = false, quiet = false;
 };
 
@@ -88,7 +90,18 @@ int runRender(RenderArgs& a)
     if (!a.range.empty()) a.job.range = parseRange(a.range);
     if (!a.camera.empty()) a.job.camera = parseCamera(a.camera);
     if (a.colormapGiven) a.job.colormap = a.colormap;
-    const jobs::RenderResult r = jobs::render(a.job);
+    if (a.frames.empty() && scene::hasFrameField(a.job.input)) {
+        throw ParamError(param::kFrames, "the input '" + a.job.input + "' is a sequence (it "
+                         "has #): choose the frames of a contact sheet", "",
+                         ParamError::Kind::Missing);
+    }
+    jobs::ContactSheetOptions sheet;
+    if (!a.frames.empty()) {
+        sheet.base = a.job;
+        sheet.frames = scene::parseFrameRange(a.frames);
+        sheet.columns = a.columns;
+    }
+    const jobs::RenderResult r = a.frames.empty() ? jobs::render(a.job) : jobs::contactSheet(sheet);
     if (!a.quiet) {
         std::printf("%s: %dx%d, %zu pixels on the surface, %.3f s -> %s\n", a.job.input.c_str(),
                     r.width, r.height, r.surfacePixels, r.seconds, a.job.output.c_str());
@@ -123,6 +136,11 @@ void addRender(CLI::App& app, Action& action)
     cmd.add("--range", a->range,
             "LO,HI mapped to the colormap's ends (default: the grid's active value range)",
             &param::kRange);
+    cmd.add("--frames", a->frames,
+            "A-B[:STEP]: a contact sheet of these frames of a sequence (input and --color-by "
+            "with # for the frame number), one tile of --size per frame", &param::kFrames);
+    cmd.add("--columns", a->columns, "Tiles across a contact sheet, in [1, 64]", &param::kColumns)
+        ->capture_default_str();
     addQuietFlag(cmd, a->quiet);
     cmd.onRun(action, [a, colormap]() {
         a->colormapGiven = colormap->count() > 0;

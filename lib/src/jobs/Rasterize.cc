@@ -10,6 +10,14 @@
 
 #include <nlohmann/json.hpp>
 
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <filesystem>
+#include <map>
+#include <mutex>
 #include <sstream>
 
 namespace ivdb::jobs {
@@ -52,15 +60,22 @@ std::string sceneAsRasterized(const scene::Scene& sc, const raster::RasterSettin
 
 } // namespace
 
-RasterizeResult rasterize(const RasterizeOptions& opt)
+namespace {
+
+/// The scene of @a opt at @a frame (unset: not a frame of a sequence).
+scene::Scene loadFrame(const RasterizeOptions& opt, std::optional<double> frame, bool readInputs)
 {
-    Stopwatch clock;
     // The overrides first: mesh and vdb nodes are built at them.
     if (opt.voxelSize) check(limits::kVoxelSize, *opt.voxelSize);
     if (opt.halfWidth) check(limits::kHalfWidth, *opt.halfWidth);
-    const scene::Scene sc = scene::loadScene(opt.scene, {opt.voxelSize, opt.halfWidth});
-    if (!opt.output.empty()) io::checkOutputPath(opt.output);
+    return scene::loadScene(opt.scene, {opt.voxelSize, opt.halfWidth, frame, readInputs});
+}
 
+RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& sc,
+                               std::optional<int> frame)
+{
+    Stopwatch clock;
+    if (!opt.output.empty()) io::checkOutputPath(opt.output);
     RasterizeResult result;
     result.notes = sc.notes;
     result.settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
@@ -85,7 +100,8 @@ RasterizeResult rasterize(const RasterizeOptions& opt)
     result.computeSeconds = clock.lap();
     if (result.surface->activeVoxelCount() == 0) {
         std::ostringstream os;
-        os << opt.scene << ": the surface has no voxels at voxel size " << settings.voxelSize
+        os << opt.scene << (frame ? ": frame " + std::to_string(*frame) : std::string())
+           << ": the surface has no voxels at voxel size " << settings.voxelSize
            << " (no zero crossing inside the bounds, or a shape smaller than a voxel): "
            << "check the shape and bounds, or use a smaller voxel size; nothing was written";
         OPENVDB_THROW(openvdb::RuntimeError, os.str());
@@ -95,8 +111,204 @@ RasterizeResult rasterize(const RasterizeOptions& opt)
     result.surface->insertMeta("ivdb_scene", openvdb::StringMetadata(sceneAsRasterized(sc, settings)));
     result.surface->insertMeta("ivdb_sampling", openvdb::StringMetadata(
         settings.sampling == raster::Sampling::Dense ? "dense" : "sparse"));
+    if (frame) result.surface->insertMeta("ivdb_frame", openvdb::Int32Metadata(*frame));
     if (opt.fog) result.density = detail::fogWithStamps(*result.surface);
     result.fileBytes = detail::writeGrids(opt.output, {result.surface, result.density}, opt.write);
+    result.totalSeconds = clock.total();
+    return result;
+}
+
+} // namespace
+
+RasterizeResult rasterize(const RasterizeOptions& opt)
+{
+    const scene::Scene sc = loadFrame(opt, std::nullopt, true);
+    if (sc.animated) {
+        throw ParamError(param::kFrames, opt.scene + " has keyed values (an animation): choose "
+                         "the frames to write, with # in the output name where the frame number "
+                         "goes", "", ParamError::Kind::Missing);
+    }
+    return rasterizeScene(opt, sc, std::nullopt);
+}
+
+namespace {
+
+/// Reports one sequence-wide percentage to the caller's interrupter while frames run: the
+/// frames done plus this one's share.
+class FrameProgress final: public util::Interrupter
+{
+public:
+    FrameProgress(util::Interrupter* outer, const std::atomic<std::size_t>& done, std::size_t count)
+        : mOuter(outer), mDone(done), mCount(count) {}
+    void start(const char*) override {}
+    void end() override {}
+    bool wasInterrupted(int percent) override
+    {
+        const std::size_t share = percent < 0 ? 0 : std::size_t(percent);
+        const int overall = int(std::min<std::size_t>(99, (mDone.load() * 100 + share) / mCount));
+        return util::wasInterrupted(mOuter, percent < 0 ? -1 : overall);
+    }
+
+private:
+    util::Interrupter* mOuter;
+    const std::atomic<std::size_t>& mDone;
+    std::size_t mCount;
+};
+
+/// True if @a path already holds a frame: a .vdb that reads whole with a `surface` level set.
+bool isWholeFrame(const std::string& path)
+{
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) return false;
+    try {
+        for (const auto& g : io::readVdb(path)) {
+            if (g->getName() == "surface" && g->getGridClass() == openvdb::GRID_LEVEL_SET) return true;
+        }
+    } catch (const openvdb::Exception&) {
+    }
+    return false;
+}
+
+/// The frames to write, after checking that the scene animates them into distinct files.
+std::vector<int> sequenceFrames(const SequenceOptions& opt)
+{
+    const RasterizeOptions& base = opt.base;
+    const scene::Scene first = loadFrame(base, std::nullopt, false);
+    if (!first.animated) {
+        throw ParamError(param::kFrames, "are for animated scenes, and " + base.scene + " has "
+                         "no keyed value: nothing moves from frame to frame (docs/scene-format.md"
+                         "#animation)");
+    }
+    if (!opt.frames && !first.frames) {
+        throw ParamError(param::kFrames, base.scene + " gives no \"frames\": choose the frames "
+                         "to write", "", ParamError::Kind::Missing);
+    }
+    const std::vector<int> frames = (opt.frames ? *opt.frames : *first.frames).frames();
+    if (base.output.empty()) return frames;
+    if (frames.size() > 1 && !scene::hasFrameField(base.output)) {
+        throw ParamError(param::kOutput, "needs # where the frame number goes (out_####.vdb) "
+                         "for " + std::to_string(frames.size()) + " frames, got '" + base.output + "'");
+    }
+    io::checkOutputPath(scene::frameFileName(base.output, frames.front()));
+    // Every frame's values are checked before any file is written.
+    for (int f : frames) sceneSettings(loadFrame(base, f, false), base.scene, base.voxelSize, base.halfWidth);
+    return frames;
+}
+
+} // namespace
+
+namespace {
+
+/// The frames of one sequence being made: each frame made on its own, reported in frame order.
+class Sequence
+{
+public:
+    Sequence(const SequenceOptions& opt, std::vector<int> frames)
+        : mOpt(opt), mFrames(std::move(frames)) {}
+
+    std::size_t size() const { return mFrames.size(); }
+
+    /// Make (or, resuming, skip) frame @a i and keep its report for deliver().
+    void make(std::size_t i)
+    {
+        FrameReport report;
+        report.frame = mFrames[i];
+        report.index = i;
+        report.count = mFrames.size();
+        report.output = mOpt.base.output.empty()
+            ? std::string() : scene::frameFileName(mOpt.base.output, report.frame);
+        report.skipped = mOpt.resume && !report.output.empty() && isWholeFrame(report.output);
+        if (!report.skipped) {
+            FrameProgress progress(mOpt.base.interrupter, mDone, mFrames.size());
+            RasterizeOptions one = mOpt.base;
+            one.output = report.output;
+            one.interrupter = mOpt.base.interrupter ? &progress : nullptr;
+            report.result = rasterizeScene(one, loadFrame(one, report.frame, true), report.frame);
+        }
+        ++mDone;
+        std::lock_guard<std::mutex> lock(mMutex);
+        mMade.emplace(i, std::move(report));
+    }
+
+    /// Report every made frame whose predecessors are reported (all of them if @a all), one
+    /// caller at a time so the reports come in frame order.
+    void deliver(bool all = false)
+    {
+        std::lock_guard<std::mutex> delivering(mDeliver);
+        for (;;) {
+            FrameReport report;
+            {
+                std::lock_guard<std::mutex> lock(mMutex);
+                auto it = mMade.begin();
+                if (it == mMade.end() || (!all && it->first != mNext)) return;
+                report = std::move(it->second);
+                mMade.erase(it);
+                mNext = report.index + 1;
+            }
+            ++(report.skipped ? mResult.skipped : mResult.written);
+            if (mOpt.onFrame) mOpt.onFrame(report);
+        }
+    }
+
+    SequenceResult& result() { return mResult; }
+
+private:
+    const SequenceOptions& mOpt;
+    std::vector<int> mFrames;
+    std::atomic<std::size_t> mDone{0};
+    std::mutex mMutex, mDeliver;
+    std::map<std::size_t, FrameReport> mMade;
+    std::size_t mNext = 0;
+    SequenceResult mResult;
+};
+
+/// How many frames may be made at once: @a given if > 0, else as many as there are threads,
+/// while that many of the first frame's peak memory (@a frameBytes) fits the memory budget.
+std::size_t framesInFlight(int given, std::uint64_t frameBytes)
+{
+    if (given > 0) return std::size_t(given);
+    const std::size_t threads = tbb::this_task_arena::max_concurrency();
+    const double fit = util::memoryBudget() / double(std::max<std::uint64_t>(frameBytes, 1));
+    return std::max<std::size_t>(1, std::min<std::size_t>(threads, std::size_t(std::max(fit, 1.0))));
+}
+
+} // namespace
+
+SequenceResult rasterizeSequence(const SequenceOptions& opt)
+{
+    Stopwatch clock;
+    check(limits::kParallelFrames, opt.parallelFrames);
+    Sequence seq(opt, sequenceFrames(opt));
+    util::InterruptScope scope(opt.base.interrupter, "rasterize frames");
+    // Frame by frame, a frame's own parallel loops leave a core idle half the time on two
+    // (serial stretches: reading the scene, the redistancing sweeps, opening and renaming the
+    // file), so several frames run at once (docs/performance.md#sequences); the first runs
+    // alone to measure their memory.
+    const std::uint64_t before = util::residentMemory();
+    seq.make(0);
+    seq.deliver();
+    const std::uint64_t frameBytes = util::peakResidentMemory() - std::min(before, util::peakResidentMemory());
+    std::atomic<std::size_t> next{1};
+    try {
+        tbb::parallel_pipeline(framesInFlight(opt.parallelFrames, frameBytes),
+            tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
+                [&](tbb::flow_control& fc) -> std::size_t {
+                    const std::size_t i = next++;
+                    if (i >= seq.size() || util::wasInterrupted(opt.base.interrupter)) fc.stop();
+                    return i;
+                }) &
+            tbb::make_filter<std::size_t, void>(tbb::filter_mode::parallel, [&](std::size_t i) {
+                seq.make(i);
+                seq.deliver();
+            }));
+    } catch (...) {
+        seq.deliver(true); // the frames that were written before the failure
+        throw;
+    }
+    seq.deliver(true);
+    util::checkInterrupt(opt.base.interrupter);
+    scope.end();
+    SequenceResult result = seq.result();
     result.totalSeconds = clock.total();
     return result;
 }

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/scene/Scene.h>
 
+#include "KeyedValues.h"
+
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/GridShape.h>
@@ -185,6 +187,7 @@ struct SceneContext
     std::optional<double> voxelSize;  // what mesh and vdb nodes are built at
     double halfWidth;                 // the raster's half width, voxels
     std::vector<std::string>* notes;  // about mesh and vdb inputs
+    bool readInputs;                  // false: mesh and vdb nodes are not built
 };
 
 /// Where a node sits: its depth, and the band (world units) within which its values must be
@@ -393,11 +396,21 @@ GridBuild gridBuild(ObjectReader& r, const std::string& type, const Node& node)
     return {dx, std::max(band, 1.0), node.lattice ? (node.depth > 0 ? 2.0 : 0.0) : 3.0};
 }
 
+/// What a mesh or vdb node stands for when the scene is only checked: a unit sphere, once
+/// the file is known to exist.
+Implicit::Ptr placeholder(ObjectReader& r, const std::string& file)
+{
+    std::error_code ec;
+    if (!std::filesystem::exists(file, ec)) r.fail(r.childPath("file"), file + " does not exist");
+    return std::make_shared<implicit::Sphere>(kZero, 1.0);
+}
+
 Implicit::Ptr buildMesh(ObjectReader& r, const std::string& type, const Node& node)
 {
     const std::string file = inputFile(r, node);
     const GridBuild build = gridBuild(r, type, node);
     const double dx = build.dx;
+    if (!node.scene.readInputs) return placeholder(r, file);
     mesh::TriangleMesh m;
     try {
         m = mesh::readTriangleMesh(file);
@@ -428,6 +441,7 @@ Implicit::Ptr buildVdb(ObjectReader& r, const std::string& type, const Node& nod
     }
     const GridBuild build = gridBuild(r, type, node);
     const double dx = build.dx;
+    if (!node.scene.readInputs) return placeholder(r, file);
     openvdb::FloatGrid::Ptr grid;
     try {
         grid = jobs::readLevelSet(file, gridName);
@@ -650,9 +664,13 @@ Scene parseScene(const std::string& text, const std::string& origin,
                          " (scene files are JSON objects of finite numbers; see docs/"
                          "scene-format.md)");
     }
+    const detail::Animation animation = detail::resolveKeyedValues(j, overrides.frame, origin);
     ObjectReader r(j, "", origin);
     r.allowOnly({"voxel_size", "half_width", "bounds", "distance", "shape"});
     Scene scene;
+    scene.animated = animation.animated;
+    scene.frames = animation.frames;
+    scene.frame = animation.frame;
     if (r.has("voxel_size")) scene.voxelSize = r.positive("voxel_size");
     scene.halfWidth = r.has("half_width") ? r.limited("half_width", limits::kHalfWidth) : 3.0;
     scene.distanceBound =
@@ -673,7 +691,8 @@ Scene parseScene(const std::string& text, const std::string& origin,
     }
     const SceneContext context{std::filesystem::path(origin).parent_path(),
                                overrides.voxelSize ? overrides.voxelSize : scene.voxelSize,
-                               overrides.halfWidth.value_or(scene.halfWidth), &scene.notes};
+                               overrides.halfWidth.value_or(scene.halfWidth), &scene.notes,
+                               overrides.readInputs};
     const Node top{context, 0, context.voxelSize ? context.halfWidth * *context.voxelSize : 0.0};
     scene.shape = parseNode(r.raw("shape"), "shape", origin, top);
     scene.json = j.dump();

@@ -8,7 +8,9 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -55,7 +57,52 @@ struct RasterizeResult
 /// @throw scene::SceneError for a bad scene; ParamError for a bad setting; openvdb::IoError for
 /// an output that cannot be written (checked before the work); openvdb::RuntimeError when the
 /// surface has no voxel at the voxel size, memory would not suffice, or on interruption.
-/// Nothing is written on any error.
+/// Nothing is written on any error. A keyed (animated) scene is refused: its frames are
+/// rasterized by rasterizeSequence().
 RasterizeResult rasterize(const RasterizeOptions& options);
+
+/// @brief One frame of a sequence, as rasterizeSequence() reports it.
+struct FrameReport
+{
+    int frame = 0;
+    std::string output;          ///< the frame's file
+    bool skipped = false;        ///< resumed: the file already held a whole frame
+    std::size_t index = 0;       ///< its place in the sequence, from 0
+    std::size_t count = 0;       ///< the sequence's number of frames
+    RasterizeResult result;      ///< no grids when skipped
+};
+
+/// @brief What rasterizeSequence() does: the frames of a keyed scene, one .vdb each.
+struct SequenceOptions
+{
+    /// The scene and settings of every frame; its output is the name pattern, where each run
+    /// of `#` becomes the zero-padded frame number (scene::frameFileName).
+    RasterizeOptions base;
+    std::optional<scene::FrameRange> frames; ///< default: the scene's "frames"
+    bool resume = false;                     ///< skip frames whose file is already a whole frame
+    /// Frames made at once; 0: as many as there are threads, while that many of the first
+    /// frame's peak memory fits util::memoryBudget() (docs/performance.md#sequences).
+    int parallelFrames = 0;
+    /// Called after each frame is written (or skipped), in frame order.
+    std::function<void(const FrameReport&)> onFrame;
+};
+
+struct SequenceResult
+{
+    std::size_t written = 0, skipped = 0;
+    double totalSeconds = 0.0;
+};
+
+/// @brief Rasterize the frames of a keyed scene (docs/scene-format.md#animation) into a .vdb
+/// sequence: the first frame alone, then several frames at once (each on the threads it gets),
+/// each file written atomically.
+/// @details Every frame's scene and settings are checked before the first file is written. The
+/// interrupter sees one percentage across the whole sequence; on interruption the frames
+/// already written stay whole and the frame being made is not written.
+/// @throw ParamError (parameter "frames") for a range the scene does not animate: a scene
+/// without keyed values, no range given nor in the scene; (parameter "output") for several
+/// frames and an output name without `#`; (parameter "parallel_frames") for a negative count;
+/// the errors of rasterize() for any frame
+SequenceResult rasterizeSequence(const SequenceOptions& options);
 
 } // namespace ivdb::jobs

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <ivdb/implicit/Implicit.h>
+#include <ivdb/scene/Animation.h>
 
 #include <optional>
 #include <stdexcept>
@@ -24,6 +25,11 @@ struct SceneOverrides
 {
     std::optional<double> voxelSize;
     std::optional<double> halfWidth;
+    /// The frame keyed values take (default: the file's "frames" start, else 1).
+    std::optional<double> frame;
+    /// False: check the scene only; mesh and vdb nodes check that their files exist but do not
+    /// read them (a sequence checks every frame this way before it writes any).
+    bool readInputs = true;
 };
 
 /// @brief A parsed scene: the implicit shape and how to rasterize it.
@@ -43,13 +49,20 @@ struct Scene
     /// What a user should know about the scene's inputs: a mesh that is not closed, a .vdb
     /// rebuilt at the scene's voxel size.
     std::vector<std::string> notes;
+    /// True if some value of the file is keyed (changes from frame to frame).
+    bool animated = false;
+    /// The file's "frames": {"start", "end"}, if given.
+    std::optional<FrameRange> frames;
+    /// The frame the keyed values were resolved at.
+    double frame = 1.0;
 };
 
 /// @brief Parse a scene from JSON text; @a origin names it in error messages (a file path) and
 /// its folder is where the relative file names of mesh and vdb nodes start.
 /// @details Mesh and vdb nodes read their files and build their level sets here, at the voxel
 /// size of @a overrides or else of the scene, with a band as wide as the blends, offsets and
-/// shells above them need (docs/scene-format.md#mesh).
+/// shells above them need (docs/scene-format.md#mesh). Keyed values are resolved at the frame
+/// of @a overrides before any node is read (docs/scene-format.md#animation).
 /// @throw SceneError on any invalid content, naming the JSON path of the field
 Scene parseScene(const std::string& text, const std::string& origin,
                  const SceneOverrides& overrides = {});

@@ -98,6 +98,9 @@ inline constexpr Param kResolutions{"resolutions", "resolution"};
 inline constexpr Param kMethod{"method", "method"};
 inline constexpr Param kCompression{"compression", "compression"};
 inline constexpr Param kHalf{"half", "half floats"};
+inline constexpr Param kFrames{"frames", "frame range"};
+inline constexpr Param kColumns{"columns", "contact sheet columns"};
+inline constexpr Param kParallelFrames{"parallel_frames", "frames made at once"};
 } // namespace param
 
 namespace limits {
@@ -128,6 +131,11 @@ inline constexpr Limit kLength{param::kLength, 0.0, kInf, false, false, "",
 inline constexpr Limit kNear{param::kNear, 0.0, kInf, true, false, "voxels"};
 /// Image width and height, pixels.
 inline constexpr Limit kImageSide{param::kImageSize, 1.0, 16384.0, false, false, "pixels"};
+/// Tiles across a contact sheet, and tiles in one.
+inline constexpr Limit kColumns{param::kColumns, 1.0, 64.0};
+inline constexpr Limit kSheetTiles{param::kFrames, 1.0, 1024.0, false, false, "frames"};
+/// Frames of a sequence made at once (0: chosen from the threads and memory).
+inline constexpr Limit kParallelFrames{param::kParallelFrames, 0.0, 1024.0, false, false, "", "(0: automatic)"};
 /// Vertical field of view, degrees.
 inline constexpr Limit kFov{param::kFov, 0.0, 180.0, true, true, "degrees"};
 /// Runs per benchmark measurement.
