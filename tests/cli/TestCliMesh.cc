@@ -1,13 +1,20 @@
 // SPDX-License-Identifier: Apache-2.0
-// ivdb mesh and --fog end to end: the files written (read back with OpenVDB), and bad arguments
-// (non-zero exit, `ivdb: error: `, no output).
+// ivdb mesh, glyphs, render (its colour bar read back from the PNG) and --fog end to end: the
+// files written (read back with OpenVDB, libpng), and bad arguments (non-zero exit,
+// `ivdb: error: `, no output).
 #include "CliRun.h"
+#include "../render/ReadText.h"
+
+#include <ivdb/render/Render.h>
+#include <ivdb/render/Text.h>
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
 
 #include <gtest/gtest.h>
+
+#include <png.h>
 
 #include <algorithm>
 #include <atomic>
@@ -190,6 +197,77 @@ TEST_F(TestCliMesh, RenderWritesImagesAndRefusesBadArguments)
         EXPECT_NE(r.exitCode, 0) << mention;
         EXPECT_NE(r.err.find(mention), std::string::npos) << "expected '" << mention << "' in " << r.err;
         EXPECT_FALSE(fs::exists(mDir / "x.png")) << mention;
+    }
+}
+
+/// The ink (dark pixels) of a PNG read back through libpng, as the reader of an image sees it.
+ivdb::test::InkMap readPngInk(const fs::path& file)
+{
+    png_image p{};
+    p.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&p, file.c_str())) {
+        ADD_FAILURE() << file << ": " << p.message;
+        return {};
+    }
+    p.format = PNG_FORMAT_RGB;
+    std::vector<unsigned char> rgb(PNG_IMAGE_SIZE(p));
+    if (!png_image_finish_read(&p, nullptr, rgb.data(), 0, nullptr)) ADD_FAILURE() << p.message;
+    return ivdb::test::inkOfRgb(int(p.width), int(p.height), rgb);
+}
+
+/// The words of @a texts in @a ink at the text scale of its size, each found exactly once, in
+/// the order given.
+std::vector<ivdb::test::Word> findWords(const ivdb::test::InkMap& ink, const std::vector<std::string>& texts)
+{
+    const auto words = ivdb::test::readWords(ink, ivdb::render::textScale(ink.width, ink.height));
+    std::string all;
+    for (const auto& w : words) all += " '" + w.text + "'";
+    std::vector<ivdb::test::Word> found;
+    for (const std::string& text : texts) {
+        const auto n = std::count_if(words.begin(), words.end(), [&](const auto& w) { return w.text == text; });
+        EXPECT_EQ(n, 1) << "'" << text << "' among the words read:" << all;
+        const auto it = std::find_if(words.begin(), words.end(), [&](const auto& w) { return w.text == text; });
+        found.push_back(it == words.end() ? ivdb::test::Word{"", -1, -1} : *it);
+    }
+    return found;
+}
+
+TEST_F(TestCliMesh, RenderedColourBarShowsTheRangeAndTheQuantity)
+{
+    ASSERT_EQ(runIvdb(mDir, {"rasterize", "s.json", "-o", "s.vdb", "-q"}).exitCode, 0);
+    ASSERT_EQ(runIvdb(mDir, {"curvature", "s.vdb", "-o", "k.vdb", "-q"}).exitCode, 0);
+    ASSERT_EQ(runIvdb(mDir, {"gradient", "s.vdb", "-o", "g.vdb", "-q"}).exitCode, 0);
+    auto r = runIvdb(mDir, {"render", "s.vdb", "-o", "a.png", "--size", "160x120", "--color-by",
+                            "k.vdb:curvature", "--range=-50,50", "-q"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    // The title above the values, hi at the top, right-aligned in the right half of the image.
+    const std::vector<std::string> texts = {"curvature (1/length)", "50", "0", "-50"};
+    const auto at = findWords(readPngInk(mDir / "a.png"), texts);
+    for (size_t k = 1; k < texts.size(); ++k) {
+        EXPECT_LT(at[k - 1].y, at[k].y) << texts[k - 1] << " above " << texts[k];
+        const int right = at[k].x + ivdb::render::textWidth(texts[k], 1);
+        EXPECT_EQ(right, at[3].x + ivdb::render::textWidth("-50", 1)) << texts[k];
+        EXPECT_GT(right, 80) << texts[k];
+    }
+
+    // Without --range, the level set's own value range; its distances are lengths.
+    r = runIvdb(mDir, {"render", "s.vdb", "-o", "b.png", "--size", "320x240", "--color-by", "s.vdb", "-q"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    openvdb::io::File file((mDir / "s.vdb").string());
+    file.open();
+    const auto surface = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid("surface"));
+    file.close();
+    const auto [lo, hi] = ivdb::render::valueRange(*surface);
+    const auto ticks = ivdb::render::colorBarTicks(lo, hi);
+    const auto atB = findWords(readPngInk(mDir / "b.png"), {"surface (length)", ticks[2], ticks[1], ticks[0]});
+    EXPECT_LT(atB[1].y, atB[2].y);
+    EXPECT_LT(atB[2].y, atB[3].y);
+
+    // Coloured by direction, or written as EXR: no bar.
+    r = runIvdb(mDir, {"render", "s.vdb", "-o", "c.png", "--size", "160x120", "--color-by", "g.vdb", "-q"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    for (const auto& w : ivdb::test::readWords(readPngInk(mDir / "c.png"), 1)) {
+        EXPECT_EQ(w.text.find("gradient"), std::string::npos) << w.text;
     }
 }
 

@@ -391,6 +391,38 @@ TEST_F(TestJobs, VisualizeJobsCheckTheirParameters)
     EXPECT_TRUE(fs::exists(path("r.png")));
 }
 
+TEST_F(TestJobs, ColorBarLabelNamesTheQuantityAndItsUnits)
+{
+    writeText("small.json", R"({"voxel_size": 0.05, "shape": {"type": "sphere", "radius": 1}})");
+    jobs::RasterizeOptions ro;
+    ro.scene = path("small.json");
+    ro.fog = true;
+    const jobs::RasterizeResult raster = jobs::rasterize(ro);
+    ASSERT_TRUE(raster.surface && raster.density);
+    EXPECT_EQ(jobs::colorBarLabel(*raster.surface), "surface (length)");
+    EXPECT_EQ(jobs::colorBarLabel(*raster.density), "density");
+    openvdb::io::File(path("s.vdb")).write({raster.surface});
+
+    // The curvatures' units from the metadata `ivdb curvature` writes.
+    const std::vector<std::pair<jobs::CurvatureMethod, std::string>> methods = {
+        {jobs::CurvatureMethod::Mean, "curvature (1/length)"},
+        {jobs::CurvatureMethod::Gaussian, "curvature (1/length^2)"},
+        {jobs::CurvatureMethod::Laplacian, "curvature (1/length)"},
+        {jobs::CurvatureMethod::Principal, "k1 (1/length)"}};
+    for (const auto& [method, label] : methods) {
+        jobs::CurvatureOptions co;
+        co.input = path("s.vdb");
+        co.method = method;
+        const jobs::CurvatureResult k = jobs::curvature(co);
+        ASSERT_FALSE(k.grids.empty());
+        EXPECT_EQ(jobs::colorBarLabel(*k.grids.front()), label);
+    }
+    jobs::GradientOptions go;
+    go.input = path("s.vdb");
+    go.magnitude = true;
+    EXPECT_EQ(jobs::colorBarLabel(*jobs::gradient(go).magnitude), "gradient_magnitude");
+}
+
 TEST_F(TestJobs, InfoAndBenchSweepInProcess)
 {
     rasterize("sphere.json", "s.vdb");

@@ -117,7 +117,7 @@ TEST_F(TestRender, ExrAndPngReadBack)
     render::Image img = render::renderLevelSet(*mSphere, s);
     const std::string exr = (mDir / "a.exr").string(), png = (mDir / "a.png").string();
     render::writeExr(exr, img);
-    render::drawColorBar(img, *s.colormap);
+    render::drawColorBar(img, *s.colormap, s.lo, s.hi, "surface (length)");
     render::writePng(png, img);
 
     Imf::InputFile in(exr.c_str());

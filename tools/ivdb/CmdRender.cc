@@ -127,8 +127,9 @@ void addRender(CLI::App& app, Action& action)
             &param::kCamera);
     cmd.name(param::kFov, "--camera fov");
     cmd.add("--color-by", a->job.colorBy,
-            "FILE.vdb[:GRID]: colour the surface by a scalar grid through the colormap (with a "
-            "colour bar on PNG), or by a vector grid's direction", &param::kColorBy);
+            "FILE.vdb[:GRID]: colour the surface by a scalar grid through the colormap (on PNG "
+            "with a colour bar labelled with the range and the grid's name), or by a vector "
+            "grid's direction", &param::kColorBy);
     CLI::Option* colormap = cmd.add("--colormap", a->colormap, "hsv, viridis, coolwarm or gray",
                                     &param::kColormap)
         ->capture_default_str();

@@ -135,6 +135,17 @@ render::Camera chooseCamera(const openvdb::FloatGrid& surface, const RenderOptio
 
 } // namespace
 
+std::string colorBarLabel(const openvdb::GridBase& grid)
+{
+    std::string unit;
+    if (const auto kind = grid.getMetadata<openvdb::StringMetadata>("ivdb_curvature")) {
+        unit = kind->value().rfind("Gaussian", 0) == 0 ? "1/length^2" : "1/length";
+    } else if (grid.getGridClass() == openvdb::GRID_LEVEL_SET) {
+        unit = "length";
+    }
+    return unit.empty() ? grid.getName() : grid.getName() + " (" + unit + ")";
+}
+
 RenderResult render(const RenderOptions& opt)
 {
     Stopwatch clock;
@@ -163,7 +174,7 @@ RenderResult render(const RenderOptions& opt)
     }
     render::Image image = render::renderLevelSet(*surface, s);
     const bool png = util::extensionOf(opt.output) == ".png";
-    if (scalar && png) render::drawColorBar(image, *s.colormap);
+    if (scalar && png) render::drawColorBar(image, *s.colormap, s.lo, s.hi, colorBarLabel(*s.colorScalar));
     if (png) render::writePng(opt.output, image);
     else render::writeExr(opt.output, image, !opt.floatExr);
     RenderResult result;

@@ -141,24 +141,6 @@ Image renderLevelSet(const openvdb::FloatGrid& grid, const RenderSettings& s)
     return img;
 }
 
-void drawColorBar(Image& image, const Colormap& map)
-{
-    const int barW = std::max(4, image.width / 40), margin = std::max(2, image.width / 80);
-    const int top = image.height / 10, bottom = image.height - image.height / 10;
-    const int x0 = image.width - margin - barW;
-    if (x0 < 0 || bottom <= top) return;
-    for (int j = top; j < bottom; ++j) {
-        const double t = double(bottom - 1 - j) / double(std::max(1, bottom - top - 1));
-        const openvdb::Vec3f c = map.at(t);
-        for (int i = x0; i < x0 + barW; ++i) {
-            const size_t p = size_t(j) * size_t(image.width) + size_t(i);
-            const bool edge = i == x0 || i == x0 + barW - 1 || j == top || j == bottom - 1;
-            image.rgb[p] = edge ? openvdb::Vec3f(0.0f) : c;
-            image.alpha[p] = 1.0f;
-        }
-    }
-}
-
 void writePng(const std::string& path, const Image& image)
 {
     std::vector<png_byte> pixels(size_t(image.width) * size_t(image.height) * 4);

@@ -80,6 +80,15 @@ struct RenderResult
     double seconds = 0.0;
 };
 
+/// @brief Render a level set to a PNG or EXR image (written atomically). A PNG coloured by a
+/// scalar grid gets a labelled colour bar: the range's ends and middle and colorBarLabel().
 RenderResult render(const RenderOptions& options);
+
+/// @brief The colour bar's title for a scalar grid: its name and, when known, the units of its
+/// values in the scene's length unit: "curvature (1/length)" (mean and principal curvatures
+/// and the Laplacian, from ivdb's `ivdb_curvature` metadata), "curvature (1/length^2)"
+/// (Gaussian), "surface (length)" (a level set's distances); the name alone otherwise
+/// (`density`, `gradient_magnitude` and other unitless or unknown quantities).
+std::string colorBarLabel(const openvdb::GridBase& grid);
 
 } // namespace ivdb::jobs

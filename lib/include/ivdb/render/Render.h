@@ -5,6 +5,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <optional>
 #include <utility>
 #include <string>
@@ -60,8 +61,25 @@ struct Image
 /// @throw openvdb::ValueError for a degenerate camera
 Image renderLevelSet(const openvdb::FloatGrid& grid, const RenderSettings& settings);
 
-/// @brief Draw a vertical colour bar of @a map (low at the bottom) at the right of @a image.
-void drawColorBar(Image& image, const Colormap& map);
+/// @brief The colour bar's labels of @a lo, (lo + hi) / 2 and @a hi, in that order: printf's
+/// %g in the C locale with the fewest significant digits, at least 3, that tell the three
+/// apart ("-50", "0", "50"; "0.001", "0.0015", "0.002"; "-1e+05", "1e+05", "3e+05"). A
+/// midpoint within 1/1000 of hi - lo from zero is "0" (the same colour); no label is "-0".
+/// @throw openvdb::ValueError unless lo < hi, both finite
+std::array<std::string, 3> colorBarTicks(double lo, double hi);
+
+/// @brief Draw a labelled vertical colour bar of @a map over [lo, hi] at the right of @a image:
+/// the gradient (hi at the top, lo at the bottom) in a dark frame, tick marks at its top,
+/// middle and bottom rows labelled with colorBarTicks() (right-aligned against the bar), and
+/// @a label (the quantity's name and units, e.g. "curvature (1/length)") above it,
+/// right-aligned with the bar. Text is dark on a white backing (85% opaque) and sets alpha, so
+/// a PNG shows it over the background; its scale is textScale() of the image. A label too wide
+/// for the image loses its " (...)" part, then its end ("..").
+/// An image too small for the bar and its three values (under about 50 pixels tall at scale 1,
+/// or too narrow for the values) is left unchanged.
+/// @throw openvdb::ValueError unless lo < hi, both finite, or if the image's buffers do not
+/// hold width x height pixels
+void drawColorBar(Image& image, const Colormap& map, double lo, double hi, const std::string& label);
 
 /// @brief 8-bit sRGB RGBA PNG through libpng, written atomically.
 /// @throw openvdb::IoError naming the path
