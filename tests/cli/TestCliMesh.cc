@@ -271,6 +271,72 @@ TEST_F(TestCliMesh, RenderedColourBarShowsTheRangeAndTheQuantity)
     }
 }
 
+/// The centre of the surface's pixels (not white) in the tile at (x0, y0) of size w x h, from a
+/// PNG read back through libpng.
+std::pair<double, double> surfaceCentre(const fs::path& file, int x0, int y0, int w, int h)
+{
+    png_image p{};
+    p.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&p, file.c_str())) return {-1, -1};
+    p.format = PNG_FORMAT_RGB;
+    std::vector<unsigned char> rgb(PNG_IMAGE_SIZE(p));
+    png_image_finish_read(&p, nullptr, rgb.data(), 0, nullptr);
+    double sx = 0, sy = 0, n = 0;
+    for (int y = y0 + 20; y < y0 + h; ++y) { // below the frame label
+        for (int x = x0; x < x0 + w; ++x) {
+            const unsigned char* px = &rgb[3 * (size_t(y) * p.width + size_t(x))];
+            if (px[0] < 250 || px[1] < 250 || px[2] < 250) sx += x, sy += y, ++n;
+        }
+    }
+    return {n ? sx / n : -1, n ? sy / n : -1};
+}
+
+// A contact sheet of a sequence: one tile a frame, labelled, from one camera (the sphere moves
+// across the tiles), one colour bar for the sheet; bad sheets refused with nothing written.
+TEST_F(TestCliMesh, ContactSheetTilesTheFramesFromOneCamera)
+{
+    std::ofstream(mDir / "move.json") << R"({"voxel_size": 0.02, "frames": {"start": 1, "end": 4},
+        "shape": {"type": "sphere", "radius": 0.3, "center": {"keys": [[1, [-0.6, 0, 0]], [4, [0.6, 0, 0]]]}}})";
+    ASSERT_EQ(runIvdb(mDir, {"rasterize", "move.json", "-o", "m_#.vdb", "-q"}).exitCode, 0);
+    for (const char* f : {"1", "2", "3", "4"}) {
+        ASSERT_EQ(runIvdb(mDir, {"curvature", std::string("m_") + f + ".vdb", "-o", std::string("k_") + f + ".vdb", "-q"}).exitCode, 0);
+    }
+    const auto r = runIvdb(mDir, {"render", "m_#.vdb", "--frames", "1-4", "--columns", "2", "--size",
+        "160x120", "--color-by", "k_#.vdb:curvature", "--range=-5,5", "-o", "sheet.png"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("380x240"), std::string::npos) << r.out; // 2 tiles + a 60-pixel strip
+    const ivdb::test::InkMap ink = readPngInk(mDir / "sheet.png");
+    ASSERT_EQ(ink.width, 380);
+    ASSERT_EQ(ink.height, 240);
+    const auto at = findWords(ink, {"frame 1", "frame 2", "frame 3", "frame 4", "curvature (1/length)", "5", "0", "-5"});
+    for (int k = 0; k < 4; ++k) { // each label in its tile's top-left corner
+        EXPECT_EQ(at[size_t(k)].x, (k % 2) * 160 + 2) << "frame " << k + 1;
+        EXPECT_EQ(at[size_t(k)].y, (k / 2) * 120 + 2) << "frame " << k + 1;
+    }
+    EXPECT_GT(at[4].x, 320 - 80); // the bar's title at the right
+    // One camera: the sphere's image moves from tile to tile (per-tile framing would centre it).
+    const auto first = surfaceCentre(mDir / "sheet.png", 0, 0, 160, 120);
+    const auto last = surfaceCentre(mDir / "sheet.png", 160, 120, 160, 120);
+    ASSERT_GT(first.first, 0);
+    ASSERT_GT(last.first, 0);
+    EXPECT_GT(std::abs((last.first - 160) - first.first), 20.0);
+
+    const std::vector<std::pair<std::vector<std::string>, std::string>> bad = {
+        {{"render", "m_#.vdb", "-o", "x.png"}, "is a sequence (it has #): choose the frames"},
+        {{"render", "m_#.vdb", "--frames", "1-4", "-o", "x.exr"}, "must end in .png for a contact sheet"},
+        {{"render", "m_#.vdb", "--frames", "1-5", "-o", "x.png"}, "m_5.vdb"},
+        {{"render", "m_#.vdb", "--frames", "1-4", "--columns", "0", "-o", "x.png"}, "--columns"},
+        {{"render", "m_#.vdb", "--frames", "4-1", "-o", "x.png"}, "A > B"},
+    };
+    for (const auto& [args, mention] : bad) {
+        const auto e = runIvdb(mDir, args);
+        EXPECT_EQ(e.exitCode, 1) << mention;
+        EXPECT_NE(e.err.find(mention), std::string::npos) << "expected '" << mention << "' in " << e.err;
+        EXPECT_FALSE(fs::exists(mDir / "x.png")) << mention;
+        EXPECT_FALSE(fs::exists(mDir / "x.exr")) << mention;
+    }
+}
+
 } // namespace
 
 namespace {

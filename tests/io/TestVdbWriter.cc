@@ -22,6 +22,7 @@
 #include <string>
 
 #include <tbb/global_control.h>
+#include <tbb/task_group.h>
 
 #include <unistd.h>
 
@@ -121,6 +122,42 @@ TEST_F(TestVdbWriter, HalfOptionFlagsFloatGrids)
         // Half precision: 11 significant bits.
         ASSERT_NEAR(acc.getValue(it.getCoord()), *it, std::abs(*it) * 1e-3f + 1e-7f);
     }
+}
+
+// Called from a TBB task whose group was cancelled (another task of the caller's algorithm
+// failed), the writer's parallel loops would skip work silently: it refuses instead of writing
+// a short file, and the reader refuses instead of returning a half-read grid.
+TEST_F(TestVdbWriter, CancelledTaskGroupWritesAndReadsNothing)
+{
+    auto s = sphere(1.0f, 0.01f);
+    ivdb::io::writeVdb(path("whole.vdb"), {s});
+    bool wrote = false, read = false;
+    std::string writeError, readError;
+    tbb::task_group_context context;
+    tbb::task_group group(context);
+    group.run([&] {
+        context.cancel_group_execution();
+        try {
+            ivdb::io::writeVdb(path("cancelled.vdb"), {s});
+            wrote = true;
+        } catch (const openvdb::Exception& e) {
+            writeError = e.what();
+        }
+        try {
+            read = !ivdb::io::readVdb(path("whole.vdb")).empty();
+        } catch (const openvdb::Exception& e) {
+            readError = e.what();
+        }
+    });
+    group.wait();
+    EXPECT_FALSE(wrote);
+    EXPECT_NE(writeError.find("cancelled"), std::string::npos) << writeError;
+    EXPECT_FALSE(std::filesystem::exists(path("cancelled.vdb")));
+    EXPECT_FALSE(read);
+    EXPECT_NE(readError.find("cancelled"), std::string::npos) << readError;
+    // Outside it, the same calls work.
+    ivdb::io::writeVdb(path("after.vdb"), {s});
+    EXPECT_EQ(ivdb::io::readVdb(path("after.vdb")).size(), 1u);
 }
 
 } // namespace

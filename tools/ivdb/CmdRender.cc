@@ -90,11 +90,6 @@ int runRender(RenderArgs& a)
     if (!a.range.empty()) a.job.range = parseRange(a.range);
     if (!a.camera.empty()) a.job.camera = parseCamera(a.camera);
     if (a.colormapGiven) a.job.colormap = a.colormap;
-    if (a.frames.empty() && scene::hasFrameField(a.job.input)) {
-        throw ParamError(param::kFrames, "the input '" + a.job.input + "' is a sequence (it "
-                         "has #): choose the frames of a contact sheet", "",
-                         ParamError::Kind::Missing);
-    }
     jobs::ContactSheetOptions sheet;
     if (!a.frames.empty()) {
         sheet.base = a.job;

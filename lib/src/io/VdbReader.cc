@@ -24,6 +24,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -194,6 +195,12 @@ void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
             }
         }
     });
+    // A parallel loop in a cancelled TBB context skips work silently: no half-read grid.
+    tbb::task_group_context* context = tbb::task::current_context();
+    if (context && context->is_group_execution_cancelled()) {
+        OPENVDB_THROW(openvdb::RuntimeError, "reading grid '" + grid.getName() + "' was cancelled "
+                      "(the task group running it was cancelled)");
+    }
 }
 
 /// One grid from its record on, as OpenVDB's Archive reads it (compression flags, metadata

@@ -23,6 +23,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task.h>
 #include <tbb/task_group.h>
 
 #include <algorithm>
@@ -262,6 +263,17 @@ private:
         return (mFlags & (openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ZIP)) != 0;
     }
 
+    /// A parallel loop in a cancelled TBB context (a caller's algorithm that failed elsewhere)
+    /// skips work without a word: never write the file that would leave.
+    static void throwIfCancelled()
+    {
+        tbb::task_group_context* context = tbb::task::current_context();
+        if (context && context->is_group_execution_cancelled()) {
+            OPENVDB_THROW(openvdb::RuntimeError, "the write was cancelled (the task group "
+                          "running it was cancelled); nothing was written");
+        }
+    }
+
     /// Leaves [begin, end) compressed in parallel, in chunks of kTaskLeaves, by OpenVDB's own
     /// LeafNode::writeBuffers on a stream with the state Archive::writeGrid gives its stream.
     std::vector<LeafChunk> compress(std::size_t begin, std::size_t end) const
@@ -275,6 +287,7 @@ private:
                 chunks[c] = compressChunk(from, to);
             }
         });
+        throwIfCancelled();
         return chunks;
     }
 

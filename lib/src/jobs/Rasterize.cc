@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tbb/parallel_pipeline.h>
+#include <tbb/task_group.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -298,7 +299,12 @@ SequenceResult rasterizeSequence(const SequenceOptions& opt)
                     return i;
                 }) &
             tbb::make_filter<std::size_t, void>(tbb::filter_mode::parallel, [&](std::size_t i) {
-                seq.make(i);
+                // Each frame in a context of its own: when another frame fails, the pipeline is
+                // cancelled, and a cancelled context's parallel loops skip their work silently;
+                // this frame finishes (or stops at the interrupter) on its own.
+                tbb::task_group_context isolated(tbb::task_group_context::isolated);
+                tbb::task_group frame(isolated);
+                frame.run_and_wait([&] { seq.make(i); });
                 seq.deliver();
             }));
     } catch (...) {

@@ -3,6 +3,7 @@
 
 #include <ivdb/io/VdbFile.h>
 #include <ivdb/jobs/Inputs.h>
+#include <ivdb/scene/Animation.h>
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
@@ -150,6 +151,10 @@ RenderResult render(const RenderOptions& opt)
 {
     Stopwatch clock;
     checkExtension(opt.output, {".png", ".exr"});
+    if (scene::hasFrameField(opt.input)) {
+        throw ParamError(param::kFrames, "the input '" + opt.input + "' is a sequence (it has #): "
+                         "choose the frames of a contact sheet", "", ParamError::Kind::Missing);
+    }
     render::checkImageSize(opt.width, opt.height);
     if (opt.camera.fov) check(limits::kFov, *opt.camera.fov);
     render::RenderSettings s;

@@ -39,13 +39,11 @@ float srgbToLinear(float c)
 
 } // namespace
 
-Camera frameGrid(const openvdb::FloatGrid& grid, int width, int height, double fov)
+Camera frameBox(const openvdb::BBoxd& box, int width, int height, double fov)
 {
-    const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
     Camera cam;
     cam.fov = fov;
-    if (box.empty()) return cam;
-    const Vec3d lo = grid.indexToWorld(box.min()), hi = grid.indexToWorld(box.max());
+    const Vec3d lo = box.min(), hi = box.max();
     cam.target = 0.5 * (lo + hi);
     const double radius = 0.5 * (hi - lo).length();
     // The bounding sphere fits the narrower of the two fields of view, with a 10% margin.
@@ -54,6 +52,18 @@ Camera frameGrid(const openvdb::FloatGrid& grid, int width, int height, double f
     const double distance = 1.1 * radius / std::sin(std::min(half, halfH));
     cam.eye = cam.target + Vec3d(1.0, 0.8, 1.3).unitSafe() * distance;
     return cam;
+}
+
+Camera frameGrid(const openvdb::FloatGrid& grid, int width, int height, double fov)
+{
+    const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
+    if (box.empty()) {
+        Camera cam;
+        cam.fov = fov;
+        return cam;
+    }
+    return frameBox(openvdb::BBoxd(grid.indexToWorld(box.min()), grid.indexToWorld(box.max())),
+                    width, height, fov);
 }
 
 void checkImageSize(int width, int height)

@@ -24,6 +24,9 @@ struct Camera
 /// direction (1, 0.8, 1.3) (above and to the side), far enough that the bounding sphere fits.
 Camera frameGrid(const openvdb::FloatGrid& grid, int width, int height, double fov = 40.0);
 
+/// @brief The camera of frameGrid() for a world box (the union of several grids' boxes).
+Camera frameBox(const openvdb::BBoxd& box, int width, int height, double fov = 40.0);
+
 struct RenderSettings
 {
     int width = 640, height = 480;
