@@ -3,11 +3,11 @@
 
 Run as `blender -b --factory-startup --python blender_check.py -- JOB.json RESULT.json`.
 JOB.json is {"imports": [PATH, ...], "meshes": [{"file", "grid", "threshold"}, ...],
-"sequences": [{"file", "grid", "frames"}, ...], "render": {"file", "grid", "size", "samples",
+"sequences": [{"file", "files", "grid", "frames"}, ...], "render": {"file", "grid", "size", "samples",
 "output"} or null}. RESULT.json gets, per import, the object type and the grids Blender sees; per
 mesh, the Volume to Mesh modifier's mesh (vertex and face counts, enclosed volume, bounding box);
-per sequence (imported from one of its files with frame-sequence detection, as File > Import >
-OpenVDB does by default), the objects added, the sequence's frame range, and at each of the
+per sequence (its files selected together in File > Import > OpenVDB, with frame-sequence
+detection, Blender's default), the objects added, the sequence's frame range, and at each of the
 given scene frames the file Blender loads and its Volume to Mesh measures; for the render, the
 engine and how many pixels the volume covers. The assertions are in test_blender.py: this script only measures, and any
 exception is written to RESULT.json as "error".
@@ -32,12 +32,14 @@ def clearScene():
         bpy.data.meshes.remove(mesh)
 
 
-def importVolume(path, sequence=False):
-    """File > Import > OpenVDB, as one file (no frame-sequence detection) unless @a sequence."""
+def importVolume(path, sequence=()):
+    """File > Import > OpenVDB of one file (no frame-sequence detection), or of the files of a
+    sequence selected together in the file browser (with detection, Blender's default)."""
     before = set(bpy.data.objects)
+    names = [os.path.basename(p) for p in sequence] or [os.path.basename(path)]
     bpy.ops.object.volume_import(
         filepath=path, directory=os.path.dirname(path),
-        files=[{"name": os.path.basename(path)}], use_sequence_detection=sequence)
+        files=[{"name": n} for n in names], use_sequence_detection=bool(sequence))
     added = [o for o in bpy.data.objects if o not in before]
     if len(added) != 1:
         raise RuntimeError(f"{path}: volume_import added {len(added)} objects")
@@ -104,7 +106,7 @@ def volumeToMesh(job, volumeObj=None):
 def describeSequence(job):
     """One import of a frame sequence, then Volume to Mesh at each of the job's frames."""
     before = len(bpy.data.objects)
-    volumeObj = importVolume(job["file"], sequence=True)
+    volumeObj = importVolume(job["file"], sequence=job["files"])
     volume = volumeObj.data
     result = {"file": job["file"], "objects_added": len(bpy.data.objects) - before,
               "object_type": volumeObj.type, "is_sequence": bool(volume.is_sequence),
@@ -114,7 +116,11 @@ def describeSequence(job):
         bpy.context.scene.frame_set(frame)
         measured = volumeToMesh(job, volumeObj)
         measured["scene_frame"] = frame
-        measured["frame_filepath"] = bpy.path.abspath(volume.grids.frame_filepath)
+        # The file of this frame is known to the evaluated volume (the one the modifier read).
+        evaluated = volumeObj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        evaluated.grids.load()
+        measured["frame"] = evaluated.grids.frame
+        measured["frame_filepath"] = bpy.path.abspath(evaluated.grids.frame_filepath)
         result["frames"].append(measured)
     return result
 

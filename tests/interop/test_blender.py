@@ -86,6 +86,8 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
             "meshes": [{"file": path, "grid": "surface", "threshold": 0.0}
                        for path, _, _ in cls.shapes.values()],
             "sequences": [{"file": cls.sequenceFirst, "grid": "surface", "threshold": 0.0,
+                           "files": [cls.path(f"seq/balls_{k:04d}.vdb")
+                                     for k in range(1, SEQ_FRAMES + 1)],
                            "frames": SEQ_CHECKED}],
             "render": {"file": fog, "grid": "density", "size": 64, "samples": 4,
                        "output": cls.path("fog.png"), "bbox_min": info["min"],
