@@ -4,7 +4,7 @@
 #   1. the test suite under AddressSanitizer + UndefinedBehaviorSanitizer (clang, build-asan/),
 #      the same build instrumented for libFuzzer;
 #   2. each libFuzzer target for FUZZ_SECONDS (default 60) from the seed corpus in tests/fuzz/;
-#   3. the TBB code (rasterizer, differential operators, grid CSG and blends) under
+#   3. the TBB code (rasterizer, differential operators, grid CSG and blends, sequences) under
 #      ThreadSanitizer (build-tsan/). Debian's libtbb is not instrumented;
 #      tests/tsan/TbbTsanBridge.cc shows TSan its synchronization, and a deliberate race
 #      (tests/tsan/RaceCanary.cc) must still be reported. tests/tsan.supp lists two real races
@@ -86,7 +86,7 @@ fi
 if [[ " $stages " == *" tsan "* ]]; then
   configure build-tsan thread
   echo "sanitize: building the threaded suites with TSan (build-tsan/)" >&2
-  cmake --build build-tsan -j2 --target test_raster test_diff test_ops ivdb_tbb_tsan \
+  cmake --build build-tsan -j2 --target test_raster test_diff test_ops test_scene ivdb_tbb_tsan \
     tsan_race_canary >/dev/null
   bridge=$PWD/build-tsan/tests/libivdb_tbb_tsan.so
   # The bridge must not hide real races: a deliberate one in TBB bodies has to be reported.
@@ -104,7 +104,8 @@ if [[ " $stages " == *" tsan "* ]]; then
   echo "sanitize: TSan reports the deliberate race ($(grep -c 'WARNING: ThreadSanitizer' \
     build-tsan/race_canary.log) warnings); threaded suites under TSan" >&2
   # TSan runs 5-15x slower: the long analytic blend sweep is left to the other builds.
-  for t in test_raster test_diff test_ops; do
+  # test_scene: keyed scenes, and sequences made several frames at once (a TBB pipeline).
+  for t in test_raster test_diff test_ops test_scene; do
     LD_PRELOAD=$bridge INTEL_LIBITTNOTIFY64=$bridge INTEL_ITTNOTIFY_GROUPS=sync \
       build-tsan/tests/$t --gtest_brief=1 --gtest_filter='-TestBlendGrid.MatchesAnalyticBlendedSurface'
   done
