@@ -58,6 +58,25 @@ inline std::string shellQuote(const std::string& s)
     return q + "'";
 }
 
+/// The marks sanitizer reports start with (AddressSanitizer, LeakSanitizer, UBSan's "runtime
+/// error:", ThreadSanitizer).
+inline const std::vector<std::string>& sanitizerMarks()
+{
+    static const std::vector<std::string> marks = {"AddressSanitizer", "LeakSanitizer",
+        "runtime error:", "UndefinedBehaviorSanitizer", "ThreadSanitizer"};
+    return marks;
+}
+
+/// Fail the test if a child's stderr holds a sanitizer report: a run that printed one failed,
+/// whatever its exit code and message (a report can follow ivdb's own error message).
+inline void expectNoSanitizerReport(const std::string& err, const std::string& what = "ivdb run")
+{
+    for (const auto& mark : sanitizerMarks()) {
+        EXPECT_EQ(err.find(mark), std::string::npos)
+            << what << ": a sanitizer report (" << mark << ") in its stderr:\n" << err;
+    }
+}
+
 /// Run `ivdb ARGS` in @a dir (killed after @a timeoutSeconds), with stdin from /dev/null;
 /// @a shellPrefix runs first in the same shell (e.g. "ulimit -f 4 && ", or kAddressCap).
 /// stdout and stderr go to hidden files in @a dir, removed after the run.
@@ -77,6 +96,9 @@ inline CliResult runIvdb(const std::filesystem::path& dir, const std::vector<std
     r.err = slurpFile(err);
     std::filesystem::remove(out);
     std::filesystem::remove(err);
+    std::string what = "ivdb";
+    for (const auto& a : args) what += " " + a;
+    expectNoSanitizerReport(r.err, what);
     return r;
 }
 

@@ -8,6 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <gtest/gtest-spi.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -75,6 +76,21 @@ TEST_F(TestCli, Help)
     EXPECT_EQ(r.exitCode, 0) << r.err;
     expectMentions(r.out, {"--json"}, "ivdb info --help");
     EXPECT_TRUE(listing().empty());
+}
+
+// Every run's stderr is searched for sanitizer reports: the search finds each kind of report,
+// also after ivdb's own error message, and passes ivdb's messages.
+TEST_F(TestCli, SanitizerReportsInAChildFailTheTest)
+{
+    for (const char* report : {
+             "ivdb: error: bad\n=================================================================\n"
+             "==123==ERROR: AddressSanitizer: heap-use-after-free on address 0x602",
+             "==123==ERROR: LeakSanitizer: detected memory leaks",
+             "lib/src/x.cc:12:3: runtime error: signed integer overflow",
+             "WARNING: ThreadSanitizer: data race (pid=1)"}) {
+        EXPECT_NONFATAL_FAILURE(ivdb::test::expectNoSanitizerReport(report), "sanitizer report");
+    }
+    ivdb::test::expectNoSanitizerReport("ivdb: error: scene.json: shape.radius: must be > 0, got -1\n");
 }
 
 TEST_F(TestCli, UnknownSubcommandAndUsageErrors)

@@ -330,6 +330,7 @@ TEST_F(TestCliRobust, SignalsStopRunsAndLeaveNoPartialOutput)
         const int code = waitIvdb(pid, 20.0 * kSlowdown);
         const std::chrono::duration<double> took = std::chrono::steady_clock::now() - t0;
         const std::string err = slurpFile(mDir / ".err.txt");
+        ivdb::test::expectNoSanitizerReport(err, "SIGINT during dense sampling");
         EXPECT_EQ(code, 130) << err;
         EXPECT_NE(err.find("interrupted"), std::string::npos) << err;
         std::cout << "[ robust ] SIGINT during dense sampling: exit " << code << " after "
@@ -353,7 +354,9 @@ TEST_F(TestCliRobust, SignalsStopRunsAndLeaveNoPartialOutput)
         }
         EXPECT_TRUE(seen) << "the write was not caught";
         ::kill(pid, sig);
-        return waitIvdb(pid, 20.0 * kSlowdown);
+        const int code = waitIvdb(pid, 20.0 * kSlowdown);
+        ivdb::test::expectNoSanitizerReport(slurpFile(mDir / ".err.txt"), "signal during a write");
+        return code;
     };
     EXPECT_EQ(signalDuringWrite(SIGTERM), 128 + SIGTERM) << slurpFile(mDir / ".err.txt");
     EXPECT_EQ(leftovers(before), std::vector<std::string>{});

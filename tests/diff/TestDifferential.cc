@@ -311,8 +311,18 @@ namespace {
 
 struct EllipsoidErrors
 {
-    Summary angle, mean, gauss;
+    Summary angle, mean, gauss, k1, k2;
 };
+
+/// The closed-form principal curvatures H +/- sqrt(H^2 - K) of a quadric's level set at @a p.
+std::pair<double, double> quadricPrincipal(const RawEllipsoid& e, const Vec3d& p)
+{
+    Vec3d g;
+    double H, K;
+    quadricCurvatures(e, p, g, H, K);
+    const double root = std::sqrt(std::max(0.0, H * H - K));
+    return {H + root, H - root};
+}
 
 /// Gradient direction, mean and Gaussian curvature of @a phi, trilinearly interpolated at 2000
 /// analytic surface points of the ellipsoid @a e, against the closed forms.
@@ -322,12 +332,13 @@ EllipsoidErrors measureEllipsoid(const RawEllipsoid& e, const implicit::Quadric&
     const auto grad = diff::gradient(phi, 1);
     const auto mean = diff::curvature(phi, diff::Curvature::Mean);
     const auto gauss = diff::curvature(phi, diff::Curvature::Gaussian);
+    const auto [k1, k2] = diff::principalCurvatures(phi);
     openvdb::tools::GridSampler<openvdb::Vec3SGrid, openvdb::tools::BoxSampler> sGrad(*grad);
     openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sMean(*mean),
-        sGauss(*gauss);
+        sGauss(*gauss), sK1(*k1), sK2(*k2);
     std::mt19937 rng(11);
     std::normal_distribution<double> n(0.0, 1.0);
-    std::vector<double> angle, eMean, eGauss;
+    std::vector<double> angle, eMean, eGauss, eK1, eK2;
     for (int i = 0; i < 2000; ++i) {
         Vec3d u(n(rng), n(rng), n(rng));
         u.normalize();
@@ -344,8 +355,12 @@ EllipsoidErrors measureEllipsoid(const RawEllipsoid& e, const implicit::Quadric&
         angle.push_back(std::acos(c) * 180.0 / M_PI);
         eMean.push_back(std::abs(sMean.wsSample(p) - H) / std::abs(H));
         eGauss.push_back(std::abs(sGauss.wsSample(p) - K) / std::abs(K));
+        // Each principal curvature on its own (on this ellipsoid they differ but at 4 umbilics).
+        const auto [c1, c2] = quadricPrincipal(e, p);
+        eK1.push_back(std::abs(sK1.wsSample(p) - c1) / std::abs(c1));
+        eK2.push_back(std::abs(sK2.wsSample(p) - c2) / std::abs(c2));
     }
-    return {summarize(angle), summarize(eMean), summarize(eGauss)};
+    return {summarize(angle), summarize(eMean), summarize(eGauss), summarize(eK1), summarize(eK2)};
 }
 
 } // namespace
@@ -361,12 +376,15 @@ TEST_F(TestDifferential, RotatedEllipsoidFromRawQuadric)
     const EllipsoidErrors r = measureEllipsoid(e, *shape, *phi);
     std::printf("rotated ellipsoid, rasterized (dx %.3f, %zu surface points): gradient angle "
                 "worst %.4f p95 %.4f deg; mean curvature relative error p95 %.5f median %.5f "
-                "worst %.5f; Gaussian p95 %.5f median %.5f worst %.5f\n", dx, r.angle.count,
-                r.angle.worst, r.angle.p95, r.mean.p95, r.mean.median, r.mean.worst, r.gauss.p95,
-                r.gauss.median, r.gauss.worst);
+                "worst %.5f; Gaussian p95 %.5f median %.5f worst %.5f; k1 p95 %.5f, k2 p95 "
+                "%.5f\n", dx, r.angle.count, r.angle.worst, r.angle.p95, r.mean.p95,
+                r.mean.median, r.mean.worst, r.gauss.p95, r.gauss.median, r.gauss.worst,
+                r.k1.p95, r.k2.p95);
     EXPECT_LE(r.angle.worst, 0.5);
     EXPECT_LE(r.mean.p95, 0.03);
     EXPECT_LE(r.gauss.p95, 0.03);
+    EXPECT_LE(r.k1.p95, 0.03);
+    EXPECT_LE(r.k2.p95, 0.03);
 }
 
 TEST_F(TestDifferential, RotatedEllipsoidOperatorsOnSmoothDistance)
@@ -385,11 +403,65 @@ TEST_F(TestDifferential, RotatedEllipsoidOperatorsOnSmoothDistance)
     const EllipsoidErrors r = measureEllipsoid(e, *shape, *phi);
     std::printf("rotated ellipsoid, f/|grad f| band (dx %.3f, %zu surface points): gradient "
                 "angle worst %.4f p95 %.4f deg; mean curvature relative error p95 %.5f worst "
-                "%.5f; Gaussian p95 %.5f worst %.5f\n", dx, r.angle.count, r.angle.worst,
-                r.angle.p95, r.mean.p95, r.mean.worst, r.gauss.p95, r.gauss.worst);
+                "%.5f; Gaussian p95 %.5f worst %.5f; k1 p95 %.5f, k2 p95 %.5f\n", dx,
+                r.angle.count, r.angle.worst, r.angle.p95, r.mean.p95, r.mean.worst, r.gauss.p95,
+                r.gauss.worst, r.k1.p95, r.k2.p95);
     EXPECT_LE(r.angle.worst, 0.5);
     EXPECT_LE(r.mean.p95, 0.03);
     EXPECT_LE(r.gauss.p95, 0.03);
+    EXPECT_LE(r.k1.p95, 0.03);
+    EXPECT_LE(r.k2.p95, 0.03);
+}
+
+// A saddle, the hyperbolic paraboloid z = (x/a)^2 - (y/b)^2: principal curvatures of opposite
+// signs, each against its closed form, and a Gaussian curvature that is negative everywhere.
+TEST_F(TestDifferential, SaddlePrincipalCurvaturesHaveOppositeSigns)
+{
+    const double a = 0.8, b = 0.6, dx = 0.005;
+    // f = p^T A p + 2 b.p + c with A = diag(1/a^2, -1/b^2, 0), b = (0, 0, -1/2), c = 0.
+    RawEllipsoid s{};
+    s.A[0][0] = 1.0 / (a * a);
+    s.A[1][1] = -1.0 / (b * b);
+    s.b[2] = -0.5;
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) s.q[i][j] = s.A[i][j];
+        s.q[i][3] = s.q[3][i] = s.b[i];
+    }
+    auto shape = std::make_shared<implicit::Quadric>(s.q);
+    raster::RasterSettings rs = settings(dx);
+    rs.bounds = implicit::BBoxd(Vec3d(-0.45, -0.45, -0.7), Vec3d(0.45, 0.45, 0.45));
+    const auto phi = raster::rasterize(shape, rs);
+    const auto gauss = diff::curvature(*phi, diff::Curvature::Gaussian);
+    const auto [k1, k2] = diff::principalCurvatures(*phi);
+    openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sGauss(*gauss),
+        sK1(*k1), sK2(*k2);
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> u(-0.3, 0.3); // 30 voxels inside the bounds
+    std::vector<double> eK1, eK2, eGauss;
+    std::size_t wrongSign = 0;
+    for (int i = 0; i < 2000; ++i) {
+        const double x = u(rng), y = u(rng);
+        const Vec3d p(x, y, x * x / (a * a) - y * y / (b * b));
+        ASSERT_NEAR(shape->value(p), 0.0, 1e-12);
+        Vec3d g;
+        double H, K;
+        quadricCurvatures(s, p, g, H, K);
+        ASSERT_LT(K, 0.0) << "the closed form: a saddle everywhere";
+        const auto [c1, c2] = quadricPrincipal(s, p);
+        const double d1 = sK1.wsSample(p), d2 = sK2.wsSample(p), dK = sGauss.wsSample(p);
+        if (!(d1 > 0.0 && d2 < 0.0 && dK < 0.0)) ++wrongSign;
+        eK1.push_back(std::abs(d1 - c1) / std::abs(c1));
+        eK2.push_back(std::abs(d2 - c2) / std::abs(c2));
+        eGauss.push_back(std::abs(dK - K) / std::abs(K));
+    }
+    const Summary r1 = summarize(eK1), r2 = summarize(eK2), rg = summarize(eGauss);
+    std::printf("saddle z = (x/%.1f)^2 - (y/%.1f)^2 (dx %.3f, 2000 surface points): relative "
+                "error p95/worst: k1 %.5f/%.5f, k2 %.5f/%.5f, Gaussian %.5f/%.5f\n", a, b, dx,
+                r1.p95, r1.worst, r2.p95, r2.worst, rg.p95, rg.worst);
+    EXPECT_EQ(wrongSign, 0u) << "k1 > 0 > k2 and K < 0 at every point";
+    EXPECT_LE(r1.p95, 0.03);
+    EXPECT_LE(r2.p95, 0.03);
+    EXPECT_LE(rg.p95, 0.03);
 }
 
 TEST_F(TestDifferential, EqualsOpenVdbOperators)

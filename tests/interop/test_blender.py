@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Blender (Debian 12's blender 3.4, headless) opens every kind of .vdb file ivdb writes as a
 Volume object with the expected grids; its Volume to Mesh modifier on `surface` (threshold 0)
-encloses the analytic volume of a sphere, an ellipsoid and a box within 0.5%; a `--fog` file
+encloses the analytic volume of a sphere, an ellipsoid and a box within 0.1%, 0.15% and 0.1%; a `--fog` file
 renders a non-empty image in Cycles (CPU, 64x64, 4 samples).
 
 One Blender run does all of it (blender_check.py measures, this file asserts): about 2 s of
@@ -18,7 +18,9 @@ import unittest
 import interop_common as ic
 
 BLENDER_SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "blender_check.py")
-VOLUME_TOL = 0.005
+# Volume to Mesh against the analytic volume, relative: what docs/interoperability.md states
+# (measured 0.072% sphere, 0.113% ellipsoid, 0.059% box, 0.06-0.072% for the sequence's frames).
+VOLUME_TOL = {"sphere": 0.001, "ellipsoid": 0.0015, "box": 0.001, "sequence": 0.001}
 
 # Closed shapes for the volume check, a few tens of voxels across their smallest dimension; the
 # box's faces lie between voxel centres (half sizes of 31.25, 21.25 and 16.25 voxels).
@@ -145,7 +147,7 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
                 r = meshes[path]
                 self.assertGreater(r["faces"], 1000)
                 error = (abs(r["volume"]) - volume) / volume
-                self.assertLess(abs(error), VOLUME_TOL,
+                self.assertLess(abs(error), VOLUME_TOL[name],
                                 f"{name}: Blender's mesh encloses {r['volume']:.6f}, analytic "
                                 f"{volume:.6f} ({100 * error:+.3f}%)")
                 # centred on the origin within a voxel (Blender 3.4 moves the mesh by half a
@@ -156,7 +158,7 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
     def testSequenceImportsAsOneVolumeThatPlaysTheFrames(self):
         """The frames of a keyed scene import as one Volume object with the sequence's frame
         range; at three scene frames Blender loads that frame's file, and its Volume to Mesh
-        encloses the closed-form volume of the union at that frame within 0.5%."""
+        encloses the closed-form volume of the union at that frame within 0.1%."""
         r = self.result["sequences"][0]
         self.assertEqual(r["objects_added"], 1)
         self.assertEqual(r["object_type"], "VOLUME")
@@ -171,7 +173,7 @@ class BlenderOpensIvdbFiles(ic.TempDirTestCase):
                 s = 0.6 * (SEQ_FRAMES - frame) / (SEQ_FRAMES - 1)
                 volume = unionOfTwoBalls(SEQ_R, 2 * s)
                 error = (abs(m["volume"]) - volume) / volume
-                self.assertLess(abs(error), VOLUME_TOL,
+                self.assertLess(abs(error), VOLUME_TOL["sequence"],
                                 f"frame {frame}: Blender's mesh encloses {m['volume']:.6f}, "
                                 f"analytic {volume:.6f} ({100 * error:+.3f}%)")
 

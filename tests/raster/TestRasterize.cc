@@ -285,6 +285,36 @@ TEST_F(TestRasterize, SparseRefusesWhatDoesNotFit)
     EXPECT_GT(raster::rasterize(sphere, s)->activeVoxelCount(), 0u);
 }
 
+// The estimate behind the refusal: the leaves it expects (sampled interval tests) are within 20%
+// of the leaves the rasterizer builds, for a sphere, a torus and a two-sphere union.
+TEST_F(TestRasterize, SparseLeafEstimateIsWithinTwentyPercent)
+{
+    const std::vector<std::pair<std::string, implicit::Implicit::Ptr>> shapes = {
+        {"sphere", std::make_shared<implicit::Sphere>(Vec3d(0.0), 1.0)},
+        {"torus", std::make_shared<implicit::Torus>(Vec3d(0.1), 0.8, 0.25)},
+        {"union", std::make_shared<implicit::Csg>(implicit::Csg::Op::Union, std::vector<implicit::Implicit::Ptr>{
+            std::make_shared<implicit::Sphere>(Vec3d(-0.35, 0, 0), 0.6),
+            std::make_shared<implicit::Sphere>(Vec3d(0.35, 0, 0), 0.6)})}};
+    for (const auto& [name, shape] : shapes) {
+        raster::RasterSettings s = settings(0.004);
+        s.distance = raster::Distance::Bound;
+        const double built = double(raster::rasterize(shape, s)->tree().leafCount());
+        s.memoryLimit = 1;
+        std::string message;
+        try {
+            raster::rasterize(shape, s);
+        } catch (const openvdb::RuntimeError& e) {
+            message = e.what();
+        }
+        const std::size_t at = message.find("(about ");
+        ASSERT_NE(at, std::string::npos) << name << ": " << message;
+        const double estimated = std::stod(message.substr(at + 7));
+        std::printf("%s at voxel 0.004: %.0f leaves estimated, %.0f built (%+.1f%%)\n", name.c_str(),
+                    estimated, built, 100.0 * (estimated / built - 1.0));
+        EXPECT_NEAR(estimated / built, 1.0, 0.2) << name << ": " << message;
+    }
+}
+
 TEST_F(TestRasterize, SparseEqualsDenseForDataScenes)
 {
     size_t scenes = 0;

@@ -55,8 +55,8 @@ int runSequence(RasterizeArgs& a, Progress& progress)
         printNotes(f.result.notes);
         ++done;
         setInterruptedNote(std::to_string(done) + " of " + std::to_string(f.count) + " frames "
-                           "are written whole (up to frame " + std::to_string(f.frame) +
-                           "); the frame being made was not written");
+                           "are written whole, the frames being made were not written; "
+                           "--resume carries on");
         if (a.quiet) return;
         const std::string what = a.job.scene + " frame " + std::to_string(f.frame);
         if (f.skipped) std::printf("%s: already written, skipped -> %s\n", what.c_str(), f.output.c_str());

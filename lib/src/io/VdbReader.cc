@@ -11,6 +11,7 @@
 // read anyway, and reading it here in one parallel pass is faster (docs/performance.md).
 #include <ivdb/io/VdbFile.h>
 
+#include "Cancel.h"
 #include "FileMapping.h"
 #include "Layout.h"
 
@@ -24,7 +25,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -195,12 +195,7 @@ void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
             }
         }
     });
-    // A parallel loop in a cancelled TBB context skips work silently: no half-read grid.
-    tbb::task_group_context* context = tbb::task::current_context();
-    if (context && context->is_group_execution_cancelled()) {
-        OPENVDB_THROW(openvdb::RuntimeError, "reading grid '" + grid.getName() + "' was cancelled "
-                      "(the task group running it was cancelled)");
-    }
+    detail::throwIfCancelled("reading grid '" + grid.getName() + "'");
 }
 
 /// One grid from its record on, as OpenVDB's Archive reads it (compression flags, metadata
@@ -319,6 +314,7 @@ openvdb::GridPtrVec readWithOpenVdb(const std::string& path)
 
 openvdb::GridPtrVec readVdb(const std::string& path)
 {
+    detail::throwIfCancelled(path + ": reading");
     std::error_code ec;
     if (!fs::exists(path, ec)) ioError(path, "no such file");
     if (fs::is_directory(path, ec)) ioError(path, "is a folder, not a .vdb file");

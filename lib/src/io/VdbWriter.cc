@@ -10,6 +10,8 @@
 // functions, in the order Archive::writeGrid writes it (Archive.cc:1360-1443 in 10.0.1).
 #include <ivdb/io/VdbFile.h>
 
+#include "Cancel.h"
+
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/util/System.h>
 
@@ -23,7 +25,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task.h>
 #include <tbb/task_group.h>
 
 #include <algorithm>
@@ -263,17 +264,6 @@ private:
         return (mFlags & (openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ZIP)) != 0;
     }
 
-    /// A parallel loop in a cancelled TBB context (a caller's algorithm that failed elsewhere)
-    /// skips work without a word: never write the file that would leave.
-    static void throwIfCancelled()
-    {
-        tbb::task_group_context* context = tbb::task::current_context();
-        if (context && context->is_group_execution_cancelled()) {
-            OPENVDB_THROW(openvdb::RuntimeError, "the write was cancelled (the task group "
-                          "running it was cancelled); nothing was written");
-        }
-    }
-
     /// Leaves [begin, end) compressed in parallel, in chunks of kTaskLeaves, by OpenVDB's own
     /// LeafNode::writeBuffers on a stream with the state Archive::writeGrid gives its stream.
     std::vector<LeafChunk> compress(std::size_t begin, std::size_t end) const
@@ -287,7 +277,7 @@ private:
                 chunks[c] = compressChunk(from, to);
             }
         });
-        throwIfCancelled();
+        detail::throwIfCancelled("the write");
         return chunks;
     }
 
@@ -615,6 +605,7 @@ void writeTypedGrid(std::ostream& os, const std::string& name, const GridT& grid
 void writeVdbStream(std::ostream& os, const openvdb::GridCPtrVec& input,
                     const openvdb::MetaMap& fileMetadata, const WriteOptions& options)
 {
+    detail::throwIfCancelled("the write");
     const std::uint32_t flags = compressionFlags(options.compression);
     const std::uint64_t bufferLimit =
         options.bufferLimit ? options.bufferLimit : std::uint64_t(util::memoryBudget() / 4.0);
@@ -664,6 +655,7 @@ void writeVdbStream(std::ostream& os, const openvdb::GridCPtrVec& input,
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,
               const openvdb::MetaMap& fileMetadata, const WriteOptions& options)
 {
+    detail::throwIfCancelled(path + ": the write");
     writeFileAtomically(path, [&](std::ostream& os) {
         writeVdbStream(os, grids, fileMetadata, options);
     });
