@@ -381,10 +381,10 @@ TEST_F(TestDifferential, RotatedEllipsoidFromRawQuadric)
                 r.mean.median, r.mean.worst, r.gauss.p95, r.gauss.median, r.gauss.worst,
                 r.k1.p95, r.k2.p95);
     EXPECT_LE(r.angle.worst, 0.5);
-    EXPECT_LE(r.mean.p95, 0.03);
-    EXPECT_LE(r.gauss.p95, 0.03);
-    EXPECT_LE(r.k1.p95, 0.03);
-    EXPECT_LE(r.k2.p95, 0.03);
+    EXPECT_LE(r.mean.p95, 0.003);
+    EXPECT_LE(r.gauss.p95, 0.003);
+    EXPECT_LE(r.k1.p95, 0.003);
+    EXPECT_LE(r.k2.p95, 0.003);
 }
 
 TEST_F(TestDifferential, RotatedEllipsoidOperatorsOnSmoothDistance)
@@ -407,10 +407,10 @@ TEST_F(TestDifferential, RotatedEllipsoidOperatorsOnSmoothDistance)
                 r.angle.count, r.angle.worst, r.angle.p95, r.mean.p95, r.mean.worst, r.gauss.p95,
                 r.gauss.worst, r.k1.p95, r.k2.p95);
     EXPECT_LE(r.angle.worst, 0.5);
-    EXPECT_LE(r.mean.p95, 0.03);
-    EXPECT_LE(r.gauss.p95, 0.03);
-    EXPECT_LE(r.k1.p95, 0.03);
-    EXPECT_LE(r.k2.p95, 0.03);
+    EXPECT_LE(r.mean.p95, 0.003);
+    EXPECT_LE(r.gauss.p95, 0.003);
+    EXPECT_LE(r.k1.p95, 0.003);
+    EXPECT_LE(r.k2.p95, 0.003);
 }
 
 // A saddle, the hyperbolic paraboloid z = (x/a)^2 - (y/b)^2: principal curvatures of opposite
@@ -459,9 +459,9 @@ TEST_F(TestDifferential, SaddlePrincipalCurvaturesHaveOppositeSigns)
                 "error p95/worst: k1 %.5f/%.5f, k2 %.5f/%.5f, Gaussian %.5f/%.5f\n", a, b, dx,
                 r1.p95, r1.worst, r2.p95, r2.worst, rg.p95, rg.worst);
     EXPECT_EQ(wrongSign, 0u) << "k1 > 0 > k2 and K < 0 at every point";
-    EXPECT_LE(r1.p95, 0.03);
-    EXPECT_LE(r2.p95, 0.03);
-    EXPECT_LE(rg.p95, 0.03);
+    EXPECT_LE(r1.p95, 0.003);
+    EXPECT_LE(r2.p95, 0.003);
+    EXPECT_LE(rg.p95, 0.003);
 }
 
 TEST_F(TestDifferential, EqualsOpenVdbOperators)
