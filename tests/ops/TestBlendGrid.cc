@@ -35,21 +35,17 @@ protected:
 
 namespace {
 
-/// The largest |phi| / dx of @a g at up to 1000 points of @a exact's zero surface, found by
-/// bisection along random rays from @a from (inside), on rays that cross the surface once.
-/// @a used gets the number of points.
-double worstOnSurface(const implicit::Implicit& exact, const openvdb::FloatGrid& g,
-                      const Vec3d& from, double dx, int& used)
+/// Up to 1000 points of @a exact's zero surface, found by bisection along random rays from
+/// @a from (inside), on rays that cross the surface once.
+std::vector<Vec3d> surfacePoints(const implicit::Implicit& exact, const Vec3d& from)
 {
-    openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(g);
+    std::vector<Vec3d> points;
+    if (exact.value(from) >= 0.0) return points;
     std::mt19937 rng(11);
     std::normal_distribution<double> n(0.0, 1.0);
-    double worst = 0.0;
-    used = 0;
-    for (int i = 0; i < 4000 && used < 1000; ++i) {
+    for (int i = 0; i < 4000 && points.size() < 1000; ++i) {
         Vec3d d(n(rng), n(rng), n(rng));
         d.normalize();
-        if (exact.value(from) >= 0.0) break;
         double lo = 0.0, hi = 2.0;
         if (exact.value(from + d * hi) <= 0.0) continue;
         for (int k = 0; k < 60; ++k) {
@@ -59,10 +55,17 @@ double worstOnSurface(const implicit::Implicit& exact, const openvdb::FloatGrid&
         // Star-shaped from `from` along this ray: one crossing only (else skip the ray).
         bool single = true;
         for (int k = 1; k < 40 && single; ++k) single = exact.value(from + d * (lo * k / 40.0)) < 0.0;
-        if (!single) continue;
-        ++used;
-        worst = std::max(worst, std::abs(double(sampler.wsSample(from + d * lo))) / dx);
+        if (single) points.push_back(from + d * lo);
     }
+    return points;
+}
+
+/// The largest |phi| / dx of @a g at @a points.
+double worstAt(const openvdb::FloatGrid& g, const std::vector<Vec3d>& points, double dx)
+{
+    openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(g);
+    double worst = 0.0;
+    for (const Vec3d& q : points) worst = std::max(worst, std::abs(double(sampler.wsSample(q))) / dx);
     return worst;
 }
 
@@ -106,8 +109,9 @@ TEST_F(TestBlendGrid, MatchesAnalyticBlendedSurface)
             // Surface points from a point inside the result: the origin (inside the union and
             // the lens) or, for A minus B, A's far side.
             const Vec3d from = op == ops::CsgOp::Difference ? Vec3d(-0.75, 0.0, 0.0) : Vec3d(0.0);
-            int used = 0;
-            const double worst = worstOnSurface(exact, *g, from, dx, used);
+            const std::vector<Vec3d> points = surfacePoints(exact, from);
+            const int used = int(points.size());
+            const double worst = worstAt(*g, points, dx);
             size_t near = 0, unit = 0;
             auto acc = g->getConstAccessor();
             for (auto it = g->cbeginValueOn(); it; ++it) {
@@ -170,8 +174,9 @@ TEST_F(TestBlendGrid, ThreeAndFourInputsMatchTheAnalyticBlend)
             s.p = p;
             const auto g = ops::blend(op, in, s);
             const implicit::Blend exact(kind, p, shapes);
-            int used = 0;
-            const double worst = worstOnSurface(exact, *g, Vec3d(0.0, 0.05, 0.1), dx, used);
+            const std::vector<Vec3d> points = surfacePoints(exact, Vec3d(0.0, 0.05, 0.1));
+            const int used = int(points.size());
+            const double worst = worstAt(*g, points, dx);
             std::printf("grid blend of %zu spheres, op %d, p = %g: worst |phi| at %d analytic "
                         "surface points %.4f voxel\n", n, int(op), p, used, worst);
             EXPECT_GE(used, 1000) << n << " inputs, op " << int(op);
@@ -301,28 +306,10 @@ TEST_F(TestBlendGrid, SmoothEqualsFormulaAndSceneSmooth)
             const implicit::Blend exact(op, implicit::BlendKernel::polynomial(k), {sa, sb});
             // Zero crossings of the formula, along rays from inside the result.
             openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sampler(*g);
-            std::mt19937 rng(11);
-            std::normal_distribution<double> n(0.0, 1.0);
             const Vec3d from = op == ops::CsgOp::Difference ? Vec3d(-0.75, 0.0, 0.0) : Vec3d(0.0);
-            double worst = 0.0;
-            int used = 0;
-            std::vector<Vec3d> crossings;
-            for (int i = 0; i < 4000 && used < 1000; ++i) {
-                Vec3d d(n(rng), n(rng), n(rng));
-                d.normalize();
-                double lo = 0.0, hi = 2.0;
-                if (exact.value(from) >= 0.0 || exact.value(from + d * hi) <= 0.0) continue;
-                for (int it = 0; it < 60; ++it) {
-                    const double mid = 0.5 * (lo + hi);
-                    (exact.value(from + d * mid) < 0.0 ? lo : hi) = mid;
-                }
-                bool single = true;
-                for (int it = 1; it < 40 && single; ++it) single = exact.value(from + d * (lo * it / 40.0)) < 0.0;
-                if (!single) continue;
-                ++used;
-                worst = std::max(worst, std::abs(double(sampler.wsSample(from + d * lo))) / dx);
-                crossings.push_back(from + d * lo);
-            }
+            const std::vector<Vec3d> crossings = surfacePoints(exact, from);
+            const int used = int(crossings.size());
+            const double worst = worstAt(*g, crossings, dx);
             // The scene-level node, rasterized with true distances: the same surface.
             raster::RasterSettings rs;
             rs.voxelSize = dx;

@@ -63,10 +63,7 @@ render::RenderSettings tileSettings(const ContactSheetOptions& opt, const SheetE
     }
     if (opt.base.camera.eye) s.camera.eye = *opt.base.camera.eye;
     if (opt.base.camera.target) s.camera.target = *opt.base.camera.target;
-    if (opt.base.camera.fov) {
-        check(limits::kFov, *opt.base.camera.fov);
-        s.camera.fov = *opt.base.camera.fov;
-    }
+    if (opt.base.camera.fov) s.camera.fov = *opt.base.camera.fov; // checked by contactSheet()
     s.lo = extent.lo;
     s.hi = extent.hi;
     return s;
@@ -85,19 +82,6 @@ void place(render::Image& sheet, const render::Image& tile, int x0, int y0)
             sheet.normal[to] = tile.normal[from];
         }
     }
-}
-
-render::Image blankImage(int width, int height)
-{
-    render::Image img;
-    img.width = width;
-    img.height = height;
-    const size_t n = size_t(width) * size_t(height);
-    img.rgb.assign(n, openvdb::Vec3f(1.0f));
-    img.normal.assign(n, openvdb::Vec3f(0.0f));
-    img.alpha.assign(n, 0.0f);
-    img.depth.assign(n, std::numeric_limits<float>::infinity());
-    return img;
 }
 
 } // namespace
@@ -124,7 +108,7 @@ RenderResult contactSheet(const ContactSheetOptions& opt)
 
     const SheetExtent extent = measureFrames(opt, frames);
     const render::RenderSettings shared = tileSettings(opt, extent);
-    render::Image sheet = blankImage(columns * opt.base.width + strip, rows * opt.base.height);
+    render::Image sheet = render::blankImage(columns * opt.base.width + strip, rows * opt.base.height);
     const int scale = render::textScale(opt.base.width, opt.base.height);
     RenderResult result;
     for (size_t k = 0; k < frames.size(); ++k) {

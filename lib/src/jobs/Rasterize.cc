@@ -196,10 +196,6 @@ std::vector<int> sequenceFrames(const SequenceOptions& opt)
     return frames;
 }
 
-} // namespace
-
-namespace {
-
 /// The frames of one sequence being made: each frame made on its own, reported in frame order.
 class Sequence
 {
@@ -281,15 +277,14 @@ SequenceResult rasterizeSequence(const SequenceOptions& opt)
     check(limits::kParallelFrames, opt.parallelFrames);
     Sequence seq(opt, sequenceFrames(opt));
     util::InterruptScope scope(opt.base.interrupter, "rasterize frames");
-    // Frame by frame, a frame's own parallel loops leave a core idle half the time on two
-    // (serial stretches: reading the scene, the redistancing sweeps, opening and renaming the
-    // file), so several frames run at once (docs/performance.md#sequences); the first runs
-    // alone to measure their memory.
+    // A frame's serial stretches (reading the scene, opening, syncing and renaming its file)
+    // leave cores idle, so several frames run at once (docs/performance.md#sequences); the
+    // first runs alone to measure their memory.
     const std::uint64_t before = util::residentMemory();
     seq.make(0);
     seq.deliver();
     const std::uint64_t frameBytes = util::peakResidentMemory() - std::min(before, util::peakResidentMemory());
-    std::atomic<std::size_t> next{1};
+    std::size_t next = 1; // read by the serial input stage only
     try {
         tbb::parallel_pipeline(framesInFlight(opt.parallelFrames, frameBytes),
             tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,

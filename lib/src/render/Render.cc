@@ -39,6 +39,19 @@ float srgbToLinear(float c)
 
 } // namespace
 
+Image blankImage(int width, int height)
+{
+    Image img;
+    img.width = width;
+    img.height = height;
+    const size_t n = size_t(width) * size_t(height);
+    img.rgb.assign(n, openvdb::Vec3f(1.0f));
+    img.normal.assign(n, openvdb::Vec3f(0.0f));
+    img.alpha.assign(n, 0.0f);
+    img.depth.assign(n, std::numeric_limits<float>::infinity());
+    return img;
+}
+
 Camera frameBox(const openvdb::BBoxd& box, int width, int height, double fov)
 {
     Camera cam;
@@ -104,14 +117,7 @@ Image renderLevelSet(const openvdb::FloatGrid& grid, const RenderSettings& s)
     const double aspect = double(s.width) / double(s.height);
     const Vec3d light = (up * 0.6 + right * 0.3 - f).unitSafe(); // above, right, behind the eye
 
-    Image img;
-    img.width = s.width;
-    img.height = s.height;
-    const size_t n = size_t(s.width) * size_t(s.height);
-    img.rgb.assign(n, openvdb::Vec3f(1.0f));
-    img.normal.assign(n, openvdb::Vec3f(0.0f));
-    img.alpha.assign(n, 0.0f);
-    img.depth.assign(n, std::numeric_limits<float>::infinity());
+    Image img = blankImage(s.width, s.height);
     if (grid.activeVoxelCount() == 0) return img;
 
     using Intersector = openvdb::tools::LevelSetRayIntersector<openvdb::FloatGrid>;

@@ -13,13 +13,6 @@ namespace {
 
 using nlohmann::json;
 
-std::string brief(const json& v)
-{
-    std::string s = v.dump();
-    if (s.size() > 60) s = s.substr(0, 57) + "...";
-    return s;
-}
-
 [[noreturn]] void fail(const std::string& origin, const std::string& path, const std::string& what)
 {
     throw SceneError(origin + ": " + path + ": " + what);

@@ -11,6 +11,14 @@
 
 namespace ivdb::scene::detail {
 
+/// @brief A JSON value as error messages quote it: its text, cut to 60 characters.
+inline std::string brief(const nlohmann::json& v)
+{
+    std::string s = v.dump();
+    if (s.size() > 60) s = s.substr(0, 57) + "...";
+    return s;
+}
+
 /// What the keyed values of a scene file said.
 struct Animation
 {

@@ -39,13 +39,7 @@ namespace {
 using nlohmann::json;
 using implicit::Implicit;
 using implicit::Vec3d;
-
-std::string brief(const json& v)
-{
-    std::string s = v.dump();
-    if (s.size() > 60) s = s.substr(0, 57) + "...";
-    return s;
-}
+using detail::brief;
 
 /// Reads one JSON object, remembering which keys were used so unknown keys are refused.
 class ObjectReader

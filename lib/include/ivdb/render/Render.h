@@ -58,6 +58,9 @@ struct Image
     std::vector<float> alpha, depth;
 };
 
+/// @brief An empty image of @a width x @a height: white, alpha 0, depth infinity, normals 0.
+Image blankImage(int width, int height);
+
 /// @brief Ray-trace the zero surface of a level set (openvdb::tools::LevelSetRayIntersector),
 /// one ray a pixel, in parallel over rows; Lambert shading from a light above the eye.
 /// @throw ParamError for a size outside [1, 16384] or too large for memory
