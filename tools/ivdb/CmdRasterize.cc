@@ -24,8 +24,8 @@ void printSummary(const std::string& what, const jobs::RasterizeResult& r, const
 {
     std::printf("%s: %llu active voxels, grid %s, file %s, peak memory %s, compute %.3f s, "
                 "total %.3f s -> %s\n",
-                what.c_str(), (unsigned long long)r.surface->activeVoxelCount(),
-                util::formatBytes(double(r.surface->memUsage())).c_str(),
+                what.c_str(), (unsigned long long)r.activeVoxels,
+                util::formatBytes(double(r.gridBytes)).c_str(),
                 util::formatBytes(double(r.fileBytes)).c_str(),
                 util::formatBytes(double(util::peakResidentMemory())).c_str(),
                 r.computeSeconds, r.totalSeconds, output.c_str());

@@ -99,7 +99,8 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
         OPENVDB_THROW(openvdb::RuntimeError, opt.scene + ": " + util::errorText(e));
     }
     result.computeSeconds = clock.lap();
-    if (result.surface->activeVoxelCount() == 0) {
+    result.activeVoxels = result.surface->activeVoxelCount();
+    if (result.activeVoxels == 0) {
         std::ostringstream os;
         os << opt.scene << (frame ? ": frame " + std::to_string(*frame) : std::string())
            << ": the surface has no voxels at voxel size " << settings.voxelSize
@@ -108,6 +109,7 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
         OPENVDB_THROW(openvdb::RuntimeError, os.str());
     }
     settings.stats = nullptr;
+    result.gridBytes = result.surface->memUsage();
     io::stampGrid(*result.surface, opt.scene);
     result.surface->insertMeta("ivdb_scene", openvdb::StringMetadata(sceneAsRasterized(sc, settings)));
     result.surface->insertMeta("ivdb_sampling", openvdb::StringMetadata(
@@ -221,6 +223,12 @@ public:
             one.output = report.output;
             one.interrupter = mOpt.base.interrupter ? &progress : nullptr;
             report.result = rasterizeScene(one, loadFrame(one, report.frame, true), report.frame);
+            // A written frame is in its file: frames that wait for an earlier one to be reported
+            // keep no grid, so a sequence holds only the frames being made.
+            if (!report.output.empty()) {
+                report.result.surface.reset();
+                report.result.density.reset();
+            }
         }
         ++mDone;
         std::lock_guard<std::mutex> lock(mMutex);
@@ -297,10 +305,15 @@ SequenceResult rasterizeSequence(const SequenceOptions& opt)
                 // Each frame in a context of its own: when another frame fails, the pipeline is
                 // cancelled, and a cancelled context's parallel loops skip their work silently;
                 // this frame finishes (or stops at the interrupter) on its own.
+                // Reports are delivered (and their grids freed) in that context too: OpenVDB
+                // frees a tree's nodes in a parallel loop, which a cancelled pipeline would skip,
+                // leaking them.
                 tbb::task_group_context isolated(tbb::task_group_context::isolated);
                 tbb::task_group frame(isolated);
-                frame.run_and_wait([&] { seq.make(i); });
-                seq.deliver();
+                frame.run_and_wait([&] {
+                    seq.make(i);
+                    seq.deliver();
+                });
             }));
     } catch (...) {
         seq.deliver(true); // the frames that were written before the failure

@@ -48,6 +48,8 @@ struct RasterizeResult
     double computeSeconds = 0.0;      ///< reading the scene and rasterizing
     double totalSeconds = 0.0;        ///< everything, writing included
     std::uint64_t fileBytes = 0;      ///< the output's size (0 without output)
+    std::uint64_t activeVoxels = 0;   ///< the surface's (kept when its grid is not)
+    std::uint64_t gridBytes = 0;      ///< the surface's memory (kept when its grid is not)
     raster::RasterStats stats;        ///< how true distances were found (shapes not exact SDFs)
     std::vector<std::string> notes;   ///< the scene's: open meshes, rebuilt .vdb inputs
 };
@@ -69,7 +71,9 @@ struct FrameReport
     bool skipped = false;        ///< resumed: the file already held a whole frame
     std::size_t index = 0;       ///< its place in the sequence, from 0
     std::size_t count = 0;       ///< the sequence's number of frames
-    RasterizeResult result;      ///< no grids when skipped
+    /// No grids when skipped, nor when written to a file: a sequence with an output keeps
+    /// only the frames being made in memory (read a frame's grid back from its file).
+    RasterizeResult result;
 };
 
 /// @brief What rasterizeSequence() does: the frames of a keyed scene, one .vdb each.
