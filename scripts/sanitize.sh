@@ -4,11 +4,11 @@
 #   1. the test suite under AddressSanitizer + UndefinedBehaviorSanitizer (clang, build-asan/),
 #      the same build instrumented for libFuzzer;
 #   2. each libFuzzer target for FUZZ_SECONDS (default 60) from the seed corpus in tests/fuzz/;
-#   3. the TBB code (rasterizer, differential operators, grid CSG and blends, sequences) under
-#      ThreadSanitizer (build-tsan/). Debian's libtbb is not instrumented;
-#      tests/tsan/TbbTsanBridge.cc shows TSan its synchronization, and a deliberate race
-#      (tests/tsan/RaceCanary.cc) must still be reported. tests/tsan.supp lists two real races
-#      in OpenVDB.
+#   3. the TBB code (rasterizer, differential operators, grid CSG and blends, sequences, the
+#      renderer) under ThreadSanitizer (build-tsan/). Debian's libtbb is not instrumented;
+#      tests/tsan/TbbTsanBridge.cc shows TSan its synchronization, and deliberate races, one in
+#      each kind of parallel body (tests/tsan/RaceCanary.cc), must each still be reported.
+#      tests/tsan.supp lists two real races in OpenVDB and one hand-over inside libtbb.
 # Any sanitizer report, fuzz crash or failing test fails the script. Stages: SANITIZE_STAGES
 # (default "asan fuzz tsan"). The fuzzers start from a fixed seed, so a shorter run (a slower
 # machine) replays a prefix of a longer one.
@@ -40,12 +40,12 @@ configure() { # DIR SANITIZERS [extra cmake args]
 
 if [[ " $stages " == *" asan "* || " $stages " == *" fuzz "* ]]; then
   configure build-asan address,undefined -DIVDB_FUZZ=ON
-  echo "sanitize: building with ASan + UBSan + libFuzzer instrumentation (build-asan/)" >&2
+  echo "sanitize [${SECONDS} s]: building with ASan + UBSan + libFuzzer instrumentation (build-asan/)" >&2
   cmake --build build-asan -j2 >/dev/null
 fi
 
 if [[ " $stages " == *" asan "* ]]; then
-  echo "sanitize: test suite under ASan + UBSan" >&2
+  echo "sanitize [${SECONDS} s]: test suite under ASan + UBSan" >&2
   # The interop suites check file formats with outside programs, and the install test builds
   # docs/library.md against an installed package: the plain build runs both.
   (cd build-asan && ctest --output-on-failure --no-tests=error -j2 -LE "interop|install")
@@ -54,6 +54,9 @@ fi
 if [[ " $stages " == *" fuzz "* ]]; then
   for target in fuzz_scene fuzz_vdb; do
     work=build-asan/fuzz/$target
+    # A fresh corpus each run, seeded from the committed one: a run is reproducible (same seed,
+    # same inputs), not shaped by what earlier runs on this machine found.
+    rm -rf "$work/corpus"
     mkdir -p "$work/corpus" "$work/artifacts"
     extra=()
     asan_options=$ASAN_OPTIONS
@@ -71,7 +74,7 @@ if [[ " $stages " == *" fuzz "* ]]; then
       asan_options=$ASAN_OPTIONS:detect_leaks=0
       rss_limit=8192
     fi
-    echo "sanitize: fuzzing $target for ${fuzz_seconds}s" >&2
+    echo "sanitize [${SECONDS} s]: fuzzing $target for ${fuzz_seconds}s" >&2
     if ! ASAN_OPTIONS=$asan_options build-asan/tests/fuzz/$target "$work/corpus" "tests/fuzz/corpus/$target" \
          "tests/fuzz/regress/$target" -max_total_time="$fuzz_seconds" -seed=1 -timeout=20 \
          -rss_limit_mb=$rss_limit -print_final_stats=1 -artifact_prefix="$work/artifacts/" \
@@ -87,9 +90,9 @@ fi
 
 if [[ " $stages " == *" tsan "* ]]; then
   configure build-tsan thread
-  echo "sanitize: building the threaded suites with TSan (build-tsan/)" >&2
-  cmake --build build-tsan -j2 --target test_raster test_diff test_ops test_scene ivdb_tbb_tsan \
-    tsan_race_canary >/dev/null
+  echo "sanitize [${SECONDS} s]: building the threaded suites with TSan (build-tsan/)" >&2
+  cmake --build build-tsan -j2 --target test_raster test_diff test_ops test_scene test_render \
+    ivdb_tbb_tsan tsan_race_canary >/dev/null
   bridge=$PWD/build-tsan/tests/libivdb_tbb_tsan.so
   # The bridge must not hide real races: a deliberate one in TBB bodies has to be reported.
   if LD_PRELOAD=$bridge INTEL_LIBITTNOTIFY64=$bridge INTEL_ITTNOTIFY_GROUPS=sync \
@@ -98,18 +101,22 @@ if [[ " $stages " == *" tsan "* ]]; then
     echo "sanitize: TSan missed the deliberate race in tests/tsan/RaceCanary.cc" >&2
     exit 1
   fi
-  grep -q "racyBody" build-tsan/race_canary.log || {
-    echo "sanitize: the race canary failed without a TSan report on racyBody:" >&2
-    tail -20 build-tsan/race_canary.log >&2
-    exit 1
-  }
-  echo "sanitize: TSan reports the deliberate race ($(grep -c 'WARNING: ThreadSanitizer' \
+  # One race in each kind of parallel body: each must have its own report.
+  for body in racyFor racyReduce racyGroup racyPipeline; do
+    grep -q "$body()" build-tsan/race_canary.log || {
+      echo "sanitize: TSan did not report the deliberate race in $body (tests/tsan/RaceCanary.cc):" >&2
+      tail -20 build-tsan/race_canary.log >&2
+      exit 1
+    }
+  done
+  echo "sanitize: TSan reports each deliberate race ($(grep -c 'WARNING: ThreadSanitizer' \
     build-tsan/race_canary.log) warnings); threaded suites under TSan" >&2
   # TSan runs 5-15x slower: the long analytic blend sweep is left to the other builds.
-  # test_scene: keyed scenes, and sequences made several frames at once (a TBB pipeline).
-  for t in test_raster test_diff test_ops test_scene; do
+  # test_scene: keyed scenes, and sequences made several frames at once (a TBB pipeline);
+  # test_render: the ray tracer's parallel loop over image rows.
+  for t in test_raster test_diff test_ops test_scene test_render; do
     LD_PRELOAD=$bridge INTEL_LIBITTNOTIFY64=$bridge INTEL_ITTNOTIFY_GROUPS=sync \
       build-tsan/tests/$t --gtest_brief=1 --gtest_filter='-TestBlendGrid.MatchesAnalyticBlendedSurface'
   done
 fi
-echo "sanitize: all stages passed ($stages)" >&2
+echo "sanitize [${SECONDS} s]: all stages passed ($stages)" >&2

@@ -4,6 +4,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/deps.sh
+deps=$SECONDS
 scripts/build.sh
+built=$SECONDS
 cd build
 ctest --output-on-failure --no-tests=error -j2
+echo "test.sh: packages ${deps} s, build $((built - deps)) s, tests $((SECONDS - built)) s" >&2

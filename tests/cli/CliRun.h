@@ -80,6 +80,14 @@ inline void expectNoSanitizerReport(const std::string& err, const std::string& w
 /// Run `ivdb ARGS` in @a dir (killed after @a timeoutSeconds), with stdin from /dev/null;
 /// @a shellPrefix runs first in the same shell (e.g. "ulimit -f 4 && ", or kAddressCap).
 /// stdout and stderr go to hidden files in @a dir, removed after the run.
+/// "ivdb ARGS" as a user would type it, for messages.
+inline std::string commandLine(const std::vector<std::string>& args)
+{
+    std::string line = "ivdb";
+    for (const auto& a : args) line += " " + a;
+    return line;
+}
+
 inline CliResult runIvdb(const std::filesystem::path& dir, const std::vector<std::string>& args,
                          int timeoutSeconds = 120, const std::string& shellPrefix = "")
 {
@@ -96,15 +104,14 @@ inline CliResult runIvdb(const std::filesystem::path& dir, const std::vector<std
     r.err = slurpFile(err);
     std::filesystem::remove(out);
     std::filesystem::remove(err);
-    std::string what = "ivdb";
-    for (const auto& a : args) what += " " + a;
-    expectNoSanitizerReport(r.err, what);
+    expectNoSanitizerReport(r.err, commandLine(args));
     return r;
 }
 
 /// Start `ivdb ARGS` in @a dir without waiting (stdout and stderr to @a dir/.out.txt and
 /// .err.txt, stdin from /dev/null); returns its process id.
-inline pid_t spawnIvdb(const std::filesystem::path& dir, const std::vector<std::string>& args)
+inline pid_t spawnIvdb(const std::filesystem::path& dir, const std::vector<std::string>& args,
+                       const std::vector<std::pair<std::string, std::string>>& env = {})
 {
     std::vector<std::string> argv{IVDB_BINARY};
     argv.insert(argv.end(), args.begin(), args.end());
@@ -118,6 +125,7 @@ inline pid_t spawnIvdb(const std::filesystem::path& dir, const std::vector<std::
         ::dup2(in, 0);
         ::dup2(out, 1);
         ::dup2(err, 2);
+        for (const auto& [name, value] : env) ::setenv(name.c_str(), value.c_str(), 1);
         std::vector<char*> cargs;
         for (auto& a : argv) cargs.push_back(a.data());
         cargs.push_back(nullptr);

@@ -6,7 +6,9 @@
 #include <ivdb/io/VdbFile.h>
 
 #include <csignal>
+#include <cstddef>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -18,6 +20,16 @@ namespace fs = std::filesystem;
 // A sphere whose radius grows from 0.3 to 0.6 over frames 1-48.
 const char* kGrowing = R"({"voxel_size": 0.02, "frames": {"start": 1, "end": 48},
     "shape": {"type": "sphere", "radius": {"keys": [[1, 0.3], [48, 0.6]]}}})";
+
+/// True while signal @a sig is pending for process @a pid (ShdPnd in /proc/PID/status).
+bool signalPending(pid_t pid, int sig)
+{
+    std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+    for (std::string line; std::getline(in, line);) {
+        if (line.rfind("ShdPnd:", 0) == 0) return (std::stoull(line.substr(7), nullptr, 16) >> (sig - 1)) & 1u;
+    }
+    return false;
+}
 
 class TestCliAnimation: public CliTest
 {
@@ -130,6 +142,41 @@ TEST_F(TestCliAnimation, InterruptLeavesWholeFramesOnly)
     const CliResult r = run({"rasterize", "big.json", "--frames", "1-6", "--resume", "-o", "b_####.vdb", "-q"});
     EXPECT_EQ(r.exitCode, 0) << r.err;
     for (int f = 1; f <= 6; ++f) EXPECT_GT(frameOf("b_000" + std::to_string(f) + ".vdb"), 0);
+}
+
+TEST_F(TestCliAnimation, SignalsWhileTwoFramesAreBeingWrittenLeaveNoTemporaryFile)
+{
+    // Frame 1 is written alone; frames 2 and 3 are then written at once and both held inside
+    // their first write (tests/faults/WriteFaults.cc "pause:1:2"). The first SIGTERM asks the
+    // sequence to stop (it waits for the frames being made), the second ends the process at
+    // once: the handler must remove both temporary files, not only the last one opened.
+    writeText("grow.json", kGrowing);
+    const fs::path dir = mDir / "run";
+    const fs::path mark = mDir / "held";
+    const pid_t pid = spawnIvdb(dir, {"rasterize", "grow.json", "--frames", "1-6",
+                                      "--parallel-frames", "2", "-o", "g_#.vdb"},
+        {{"LD_PRELOAD", IVDB_WRITE_FAULTS}, {"IVDB_FAULT", "pause:1:2"}, {"IVDB_FAULT_MARK", mark.string()}});
+    for (int i = 0; i < 60000 * kSlowdown && !fs::exists(mark); ++i) ::usleep(1000);
+    ASSERT_TRUE(fs::exists(mark)) << slurpFile(dir / ".err.txt");
+    std::size_t temporary = 0;
+    for (const auto& e : fs::directory_iterator(dir)) temporary += e.path().filename().string().find(".tmp-") != std::string::npos;
+    EXPECT_EQ(temporary, 2u) << "two frames being written";
+    ASSERT_EQ(::kill(pid, SIGTERM), 0);
+    // Two signals sent at once may merge into one (standard signals do not queue): the second
+    // only once the first is no longer pending.
+    for (int i = 0; i < 10000 && signalPending(pid, SIGTERM); ++i) ::usleep(100);
+    ASSERT_EQ(::kill(pid, SIGTERM), 0);
+    const int code = waitIvdb(pid, 60.0 * kSlowdown);
+    const std::string err = slurpFile(dir / ".err.txt");
+    expectNoSanitizerReport(err, "signals during two writes");
+    fs::remove(dir / ".err.txt");
+    fs::remove(dir / ".out.txt");
+    EXPECT_EQ(code, 128 + SIGTERM) << err;
+    for (const auto& name : listing()) {
+        EXPECT_EQ(name.find(".tmp-"), std::string::npos) << "left behind: " << name;
+        if (name != "grow.json") EXPECT_GT(frameOf(name), 0) << name << " is not a whole frame";
+    }
+    EXPECT_EQ(frameOf("g_1.vdb"), 1);
 }
 
 TEST_F(TestCliAnimation, BadFramesAndKeysAreRefusedAndNothingIsWritten)

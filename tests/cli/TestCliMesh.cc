@@ -3,6 +3,7 @@
 // files written (read back with OpenVDB, libpng), and bad arguments (non-zero exit,
 // `ivdb: error: `, no output).
 #include "CliRun.h"
+#include "ReadPng.h"
 #include "../render/ReadText.h"
 
 #include <ivdb/render/Render.h>
@@ -200,20 +201,7 @@ TEST_F(TestCliMesh, RenderWritesImagesAndRefusesBadArguments)
     }
 }
 
-/// The ink (dark pixels) of a PNG read back through libpng, as the reader of an image sees it.
-ivdb::test::InkMap readPngInk(const fs::path& file)
-{
-    png_image p{};
-    p.version = PNG_IMAGE_VERSION;
-    if (!png_image_begin_read_from_file(&p, file.c_str())) {
-        ADD_FAILURE() << file << ": " << p.message;
-        return {};
-    }
-    p.format = PNG_FORMAT_RGB;
-    std::vector<unsigned char> rgb(PNG_IMAGE_SIZE(p));
-    if (!png_image_finish_read(&p, nullptr, rgb.data(), 0, nullptr)) ADD_FAILURE() << p.message;
-    return ivdb::test::inkOfRgb(int(p.width), int(p.height), rgb);
-}
+using ivdb::test::readPngInk;
 
 /// The words of @a texts in @a ink at the text scale of its size, each found exactly once, in
 /// the order given.

@@ -213,7 +213,14 @@ int run(int argc, char** argv)
         app.set_version_flag("--version", std::string("ivdb ") + ivdb::kVersion);
         std::optional<int> threads;
         app.add_option("--threads", threads, "Worker threads (default: all cores)")
-            ->check(CLI::PositiveNumber);
+            ->check(CLI::Validator(
+                [](std::string& v) -> std::string {
+                    int n = 0;
+                    return CLI::detail::lexical_cast(v, n) && n >= 1
+                               ? std::string()
+                               : "a number of threads must be a whole number >= 1, got " + v;
+                },
+                "INT >= 1"));
         Action action;
         addRasterize(app, action);
         addInfo(app, action);

@@ -54,6 +54,9 @@ jobs::BenchMeasurement measureInChild(const std::string& self, const jobs::Bench
         if (p.status < 0) throw std::runtime_error("signal " + std::to_string(-p.status));
         std::string why = p.err.empty() ? "no output" : p.err;
         while (!why.empty() && why.back() == '\n') why.pop_back();
+        // The child's own "ivdb: error: " prefix would be repeated inside the row's status.
+        const std::string prefix = "ivdb: error: ";
+        if (why.rfind(prefix, 0) == 0) why.erase(0, prefix.size());
         throw std::runtime_error(why);
     }
     m.peakMemory = peak;

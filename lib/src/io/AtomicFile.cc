@@ -7,7 +7,6 @@
 
 #include <atomic>
 #include <cerrno>
-#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -24,24 +23,45 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// The temporary file being written, for removePendingTemporaryFile() (a signal handler).
-char gPendingPath[4096];
-volatile std::sig_atomic_t gPendingSet = 0;
+// The temporary files being written, for removePendingTemporaryFile(), which a signal handler
+// calls: several at once when a sequence writes frames in parallel. Fixed slots and lock-free
+// atomics only (no allocation, no lock), each slot's path guarded by a sequence number that is odd
+// while the path is being copied in, so the handler never unlinks a half-copied name.
+constexpr int kPendingSlots = 64;
 
-void setPending(const std::string& tmp)
+struct PendingSlot
 {
-    gPendingSet = 0;
-    std::atomic_signal_fence(std::memory_order_seq_cst);
-    if (tmp.size() >= sizeof(gPendingPath)) return;
-    std::memcpy(gPendingPath, tmp.c_str(), tmp.size() + 1);
-    std::atomic_signal_fence(std::memory_order_seq_cst);
-    gPendingSet = 1;
+    std::atomic<bool> taken{false};   // owned by one writer
+    std::atomic<unsigned> sequence{0}; // even: path stable; odd: being copied
+    std::atomic<bool> live{false};    // path names a temporary file to remove
+    char path[4096];
+};
+static_assert(std::atomic<unsigned>::is_always_lock_free && std::atomic<bool>::is_always_lock_free);
+
+PendingSlot gPending[kPendingSlots];
+
+/// The slot now holding @a tmp, or -1 (a path too long, or more than kPendingSlots files being
+/// written at once: that file is then left behind by a signal, as by SIGKILL).
+int setPending(const std::string& tmp)
+{
+    if (tmp.size() >= sizeof(gPending[0].path)) return -1;
+    for (int i = 0; i < kPendingSlots; ++i) {
+        PendingSlot& slot = gPending[i];
+        if (slot.taken.exchange(true)) continue;
+        slot.sequence.fetch_add(1);
+        std::memcpy(slot.path, tmp.c_str(), tmp.size() + 1);
+        slot.sequence.fetch_add(1);
+        slot.live.store(true);
+        return i;
+    }
+    return -1;
 }
 
-void clearPending()
+void clearPending(int i)
 {
-    gPendingSet = 0;
-    std::atomic_signal_fence(std::memory_order_seq_cst);
+    if (i < 0) return;
+    gPending[i].live.store(false);
+    gPending[i].taken.store(false);
 }
 
 [[noreturn]] void ioError(const std::string& path, const std::string& what)
@@ -76,7 +96,15 @@ void checkOutputPath(const std::string& path)
 
 void removePendingTemporaryFile() noexcept
 {
-    if (gPendingSet) ::unlink(gPendingPath);
+    for (PendingSlot& slot : gPending) {
+        if (!slot.live.load()) continue;
+        const unsigned before = slot.sequence.load();
+        if (before % 2 != 0) continue;
+        char path[sizeof(slot.path)];
+        std::memcpy(path, slot.path, sizeof(path));
+        path[sizeof(path) - 1] = '\0';
+        if (slot.sequence.load() == before && slot.live.load()) ::unlink(path);
+    }
 }
 
 void writeFileAtomically(const std::string& path,
@@ -89,8 +117,11 @@ void writeFileAtomically(const std::string& path,
         ("." + target.filename().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
          std::to_string(counter++))).string();
     // Cleared on every way out: the temporary file is renamed or removed by then.
-    struct PendingGuard { ~PendingGuard() { clearPending(); } } pendingGuard;
-    setPending(tmp);
+    struct PendingGuard
+    {
+        int slot;
+        ~PendingGuard() { clearPending(slot); }
+    } pendingGuard{setPending(tmp)};
     try {
         const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
         if (fd < 0) ioError(path, std::string("cannot create a file there: ") + std::strerror(errno));

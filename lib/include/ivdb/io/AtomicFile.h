@@ -21,9 +21,10 @@ void checkOutputPath(const std::string& path);
 void writeFileAtomically(const std::string& path,
                          const std::function<void(std::ostream&)>& write);
 
-/// @brief Remove the temporary file that writeFileAtomically is writing now, if any.
-/// @details Async-signal-safe (one unlink): for a signal handler that is about to end the
-/// process, so that an interrupted write leaves nothing behind.
+/// @brief Remove the temporary files that writeFileAtomically is writing now, if any (several
+/// threads may be writing files at once).
+/// @details Async-signal-safe (lock-free atomics and unlink): for a signal handler that is about
+/// to end the process, so that an interrupted write leaves nothing behind.
 void removePendingTemporaryFile() noexcept;
 
 } // namespace ivdb::io
