@@ -410,6 +410,17 @@ TEST_F(TestVdbFile, ReadRefusesDamagedTransformAndRootRecords)
     expectReadFails(damaged("origin", active, "\x01\x20"), "origin 8193", "root tile");
     // A tile count the file cannot hold: 12 bytes before the first record (tiles, children).
     const std::size_t first = std::min(active, inactive);
+    // A root child origin off the grid, in each coordinate: the first child's record follows
+    // the two tile records (17 bytes each) and starts with its origin.
+    const std::size_t child = first + 2 * 17;
+    std::int32_t childOrigin[3];
+    std::memcpy(childOrigin, &bytes[child], 12);
+    for (int a = 0; a < 3; ++a) ASSERT_EQ(childOrigin[a] % 4096, 0) << "not a child record";
+    for (int a = 0; a < 3; ++a) {
+        expectReadFails(damaged("child" + std::to_string(a), child + 4 * a, "\x01"),
+                        "child origin off the grid in coordinate " + std::to_string(a),
+                        "root child at an invalid origin");
+    }
     expectReadFails(damaged("count", first - 8, std::string("\xff\xff\xff\x7f", 4)),
                     "2^31 tiles", "root tiles");
     // Metadata whose byte count is not its type's size: OpenVDB would read the type's size and

@@ -220,13 +220,7 @@ TEST_F(TestTrueDistances, DataScenesNeedNoSweeping)
     std::size_t scenes = 0;
     for (const auto& entry : std::filesystem::directory_iterator(IVDB_DATA_DIR)) {
         if (entry.path().extension() != ".json") continue;
-#ifdef IVDB_SANITIZED
-        // Sanitized builds run 10-20x slower: the scenes at twice their voxel size.
-        const scene::Scene sc = scene::loadScene(entry.path().string(),
-            {2.0 * *scene::loadScene(entry.path().string(), {{}, {}, {}, false}).voxelSize});
-#else
         const scene::Scene sc = scene::loadScene(entry.path().string());
-#endif
         if (sc.shape->isExactSdf() || sc.distanceBound) continue;
         raster::RasterStats stats;
         raster::RasterSettings s;
