@@ -220,7 +220,7 @@ int run(int argc, char** argv)
                                ? std::string()
                                : "a number of threads must be a whole number >= 1, got " + v;
                 },
-                "INT >= 1"));
+                "POSITIVE"));
         Action action;
         addRasterize(app, action);
         addInfo(app, action);
