@@ -2,6 +2,7 @@
 // ivdb bench end to end: the CSV (checked against the dense path and OpenVDB's route, which it
 // measures side by side), the plot, skipped runs, and bad arguments.
 #include "CliRun.h"
+#include "ReadCsv.h"
 
 #include <gtest/gtest.h>
 
@@ -20,45 +21,8 @@ namespace fs = std::filesystem;
 using ivdb::test::runIvdb;
 using ivdb::test::slurpFile;
 
-using CsvRow = std::map<std::string, std::string>;
-
-std::vector<std::string> splitCsvLine(const std::string& line)
-{
-    std::vector<std::string> out(1);
-    bool quoted = false;
-    for (size_t i = 0; i < line.size(); ++i) {
-        const char c = line[i];
-        if (quoted) {
-            if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') out.back() += '"', ++i;
-            else if (c == '"') quoted = false;
-            else out.back() += c;
-        } else if (c == '"') {
-            quoted = true;
-        } else if (c == ',') {
-            out.emplace_back();
-        } else {
-            out.back() += c;
-        }
-    }
-    return out;
-}
-
-std::vector<CsvRow> readCsv(const fs::path& p)
-{
-    std::istringstream in(slurpFile(p));
-    std::string line;
-    std::vector<CsvRow> rows;
-    if (!std::getline(in, line)) return rows;
-    const auto header = splitCsvLine(line);
-    while (std::getline(in, line)) {
-        const auto fields = splitCsvLine(line);
-        EXPECT_EQ(fields.size(), header.size()) << line;
-        CsvRow row;
-        for (size_t i = 0; i < header.size() && i < fields.size(); ++i) row[header[i]] = fields[i];
-        rows.push_back(row);
-    }
-    return rows;
-}
+using ivdb::test::CsvRow;
+using ivdb::test::readCsv;
 
 class TestCliBench: public ::testing::Test
 {

@@ -5,6 +5,7 @@
 // skipped and failed dense runs, compare-gradient's numbers and blend --tolerance. Each checks
 // the values written, against closed forms or OpenVDB's reading of the files.
 #include "CliRun.h"
+#include "ReadCsv.h"
 #include "ReadPng.h"
 #include "../render/ReadText.h"
 
@@ -249,38 +250,8 @@ Exr readExr(const std::string& bytes)
 
 using ivdb::test::readPngInk;
 
-using CsvRow = std::map<std::string, std::string>;
-
-/// The rows of bench.csv by column name (no field there holds a quoted comma but status, which
-/// is last and may be quoted).
-std::vector<CsvRow> readCsv(const fs::path& file)
-{
-    std::istringstream in(slurpFile(file));
-    std::string line;
-    std::vector<CsvRow> rows;
-    auto split = [](const std::string& l) {
-        std::vector<std::string> out(1);
-        bool quoted = false;
-        for (size_t i = 0; i < l.size(); ++i) {
-            const char c = l[i];
-            if (quoted && c == '"' && i + 1 < l.size() && l[i + 1] == '"') out.back() += '"', ++i;
-            else if (c == '"') quoted = !quoted;
-            else if (c == ',' && !quoted) out.emplace_back();
-            else out.back() += c;
-        }
-        return out;
-    };
-    if (!std::getline(in, line)) return rows;
-    const auto header = split(line);
-    while (std::getline(in, line)) {
-        const auto fields = split(line);
-        EXPECT_EQ(fields.size(), header.size()) << line;
-        CsvRow row;
-        for (size_t i = 0; i < header.size() && i < fields.size(); ++i) row[header[i]] = fields[i];
-        rows.push_back(row);
-    }
-    return rows;
-}
+using ivdb::test::CsvRow;
+using ivdb::test::readCsv;
 
 class TestCliOptions: public ivdb::test::CliTest
 {
