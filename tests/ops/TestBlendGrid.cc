@@ -317,6 +317,7 @@ TEST_F(TestBlendGrid, SmoothEqualsFormulaAndSceneSmooth)
                 std::make_shared<implicit::Blend>(op, implicit::BlendKernel::polynomial(k),
                                                   std::vector<implicit::Implicit::Ptr>{sa, sb}), rs);
             openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> sceneSampler(*scene);
+            const double sceneWorst = worstAt(*scene, crossings, dx);
             double apart = 0.0;
             for (const Vec3d& q : crossings) {
                 apart = std::max(apart, std::abs(double(sampler.wsSample(q)) -
@@ -335,16 +336,22 @@ TEST_F(TestBlendGrid, SmoothEqualsFormulaAndSceneSmooth)
                 bandWorst = std::max(bandWorst, double(std::abs(v - *it)) / dx);
             }
             std::printf("grid smooth %s k = %g voxels: at %d zero crossings of the formula, worst "
-                        "|phi| %.4f voxel, worst difference from the scene node %.4f voxel; in "
-                        "the band %.4f voxel at %zu voxels (%llu active, scene %llu)\n",
-                        implicit::toString(op), kv, used, worst, apart, bandWorst, both,
+                        "|phi| %.4f voxel (scene node %.4f), worst difference from the scene "
+                        "node %.4f voxel; in the band %.4f voxel at %zu voxels (%llu active, "
+                        "scene %llu)\n",
+                        implicit::toString(op), kv, used, worst, sceneWorst, apart, bandWorst, both,
                         (unsigned long long)g->activeVoxelCount(),
                         (unsigned long long)scene->activeVoxelCount());
             EXPECT_GE(used, 1000);
             // The smooth intersection's rim at k = 40 voxels: the bands were extended 40 voxels
             // by fast sweeping, whose first-order values put the surface 0.11 voxel off the
             // formula (0.104 voxel off the scene node).
-            EXPECT_LE(worst, op == ops::CsgOp::Intersection && kv == 40.0 ? 0.12 : 0.08);
+            // Where voxels cannot resolve the surface, the difference's rim at k = 2 voxels, the
+            // scene node rasterized from the formula itself reads up to 0.118 voxel at the same
+            // points (trilinear sampling of a 2-voxel bend): there, no further than it.
+            const double bound = op == ops::CsgOp::Intersection && kv == 40.0 ? 0.12 : 0.08;
+            EXPECT_LE(worst, std::max(bound, sceneWorst));
+            EXPECT_LE(sceneWorst, op == ops::CsgOp::Difference && kv == 2.0 ? 0.125 : 0.08);
             EXPECT_LE(apart, op == ops::CsgOp::Intersection && kv == 40.0 ? 0.11 : 0.08);
             EXPECT_GE(double(both), 0.98 * double(scene->activeVoxelCount()));
         }
