@@ -250,65 +250,159 @@ bool cornerPoint(const std::array<const Implicit*, 3>& f, Vec3d q, double tol, V
 
 } // namespace
 
+namespace {
+
+/// One batch of a CSG node's children as terms t_c = s_c f_c, in which the node is rho * min_c
+/// t_c: a union of the sets {t_c < 0} (rho = 1), or the complement of one (rho = -1: an
+/// intersection is the complement of the union of the children's outsides, a difference A - B
+/// of A's outside and B). The surface, and so the distance up to its sign, is that of the union.
+/// Each child's distances: an exact SDF's are its values (its foot points are found only where a
+/// crease needs them); the others' come from their own foot points.
+class CsgTerms
+{
+public:
+    CsgTerms(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
+             const double* y, const double* z, std::size_t n, const FootQuery& query)
+        : mChildren(children), mOp(op), mX(x), mY(y), mZ(z), mQuery(query),
+          mValues(children.size()), mFeet(children.size())
+    {
+        for (std::size_t c = 0; c < children.size(); ++c) {
+            children[c]->values(x, y, z, mValues[c].data(), n);
+            if (children[c]->isExactSdf()) continue;
+            mFeet[c] = std::make_unique<FootPoints>();
+            FootQuery childQuery = query;
+            childQuery.feet = true; // the creases start from them
+            children[c]->footPoints(x, y, z, mValues[c].data(), n, childQuery, *mFeet[c]);
+        }
+    }
+
+    std::size_t size() const { return mChildren.size(); }
+    double sign(std::size_t c) const
+    {
+        return mOp == Csg::Op::Union ? 1.0
+               : mOp == Csg::Op::Intersection ? -1.0 : (c == 0 ? -1.0 : 1.0);
+    }
+    /// The signed distance of child @a c at point @a i, and whether it is certified (below).
+    double distance(std::size_t c, std::size_t i) const
+    {
+        return mFeet[c] ? mFeet[c]->distance[i] : mValues[c][i];
+    }
+    bool certified(std::size_t c, std::size_t i) const { return !mFeet[c] || mFeet[c]->ok[i]; }
+
+    /// Child @a c's foot point of point @a i; false where it is not certified.
+    bool foot(std::size_t c, std::size_t i, Vec3d& q) const
+    {
+        if (mFeet[c]) {
+            q = Vec3d(mFeet[c]->x[i], mFeet[c]->y[i], mFeet[c]->z[i]);
+            return mFeet[c]->ok[i];
+        }
+        const Vec3d p(mX[i], mY[i], mZ[i]), g = mChildren[c]->gradient(p);
+        const double len = g.length();
+        q = p - g * (len > 0.0 ? mValues[c][i] / len : 0.0);
+        return len > 0.5 && len < 1.5; // an exact SDF's gradient is a unit vector
+    }
+
+    /// Inside the union at point @a i (deepest term value @a u), near a crease: the nearest point
+    /// of the union's surface is a term's foot point, a point of the crease of two terms or a
+    /// corner of three, that lies outside every other term. Only terms whose surface is within
+    /// reach can offer one. Writes the distance (at most far) and that point; returns whether
+    /// certified.
+    bool nearestInside(std::size_t i, double u, double& depth, Vec3d& nearest);
+
+private:
+    /// Outside every term at q, within the tolerance (the terms in @a on excepted).
+    bool outsideOthers(const Vec3d& q, std::initializer_list<std::size_t> on) const
+    {
+        for (std::size_t c = 0; c < mChildren.size(); ++c) {
+            if (std::find(on.begin(), on.end(), c) != on.end()) continue;
+            if (sign(c) * mChildren[c]->value(q) < -mQuery.tolerance) return false;
+        }
+        return true;
+    }
+
+    const std::vector<Implicit::Ptr>& mChildren;
+    Csg::Op mOp;
+    const double *mX, *mY, *mZ;
+    const FootQuery& mQuery;
+    std::vector<std::array<double, kMaxBatch>> mValues;
+    std::vector<std::unique_ptr<FootPoints>> mFeet;
+    std::vector<std::size_t> mNear; // reused across points
+};
+
+bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& nearest)
+{
+    const Vec3d p(mX[i], mY[i], mZ[i]);
+    mNear.clear();
+    for (std::size_t c = 0; c < size(); ++c) {
+        if (sign(c) * distance(c, i) < mQuery.far) mNear.push_back(c);
+    }
+    // Nearest surfaces first: a crease (or corner) point of terms a and b is |p - q| >= |d_a|
+    // and >= |d_b| away (the distance to each surface is at most that), so once a term is as far
+    // as the best candidate so far, no later pair or corner can beat it.
+    std::sort(mNear.begin(), mNear.end(), [&](std::size_t l, std::size_t r) {
+        return std::abs(distance(l, i)) < std::abs(distance(r, i));
+    });
+    double best = std::numeric_limits<double>::max();
+    nearest = p;
+    bool complete = true; // every candidate was found
+    auto offer = [&](const Vec3d& q) {
+        const double d = (p - q).length();
+        if (d < best) best = d, nearest = q;
+    };
+    for (std::size_t c : mNear) {
+        Vec3d q;
+        if (!foot(c, i, q)) complete = false;
+        else if (outsideOthers(q, {c})) offer(q);
+    }
+    auto beyond = [&](std::size_t c) { return std::abs(distance(c, i)) >= best; };
+    for (std::size_t a = 0; a < mNear.size() && !beyond(mNear[a]); ++a) {
+        for (std::size_t b = a + 1; b < mNear.size() && !beyond(mNear[b]); ++b) {
+            const std::size_t ca = mNear[a], cb = mNear[b];
+            Vec3d start, q;
+            foot(ca, i, start);
+            if (!creasePoint(*mChildren[ca], *mChildren[cb], p, start, mQuery.tolerance, q)) {
+                complete = false;
+                continue;
+            }
+            if (outsideOthers(q, {ca, cb})) offer(q);
+            // Where a third surface cuts this crease near q: a corner.
+            for (std::size_t k = b + 1; k < mNear.size() && !beyond(mNear[k]); ++k) {
+                const std::size_t cc = mNear[k];
+                Vec3d corner;
+                if (cornerPoint({mChildren[ca].get(), mChildren[cb].get(), mChildren[cc].get()},
+                                q, mQuery.tolerance, corner) &&
+                    outsideOthers(corner, {ca, cb, cc})) {
+                    offer(corner);
+                }
+            }
+        }
+    }
+    depth = std::min(best, mQuery.far);
+    // Certified if every candidate was found, or the best reaches the lower bound |u| of the
+    // distance (inside the union the distance is at least the deepest term's depth).
+    return best < std::numeric_limits<double>::max() &&
+           (complete || best <= -u + mQuery.tolerance);
+}
+
+} // namespace
+
 void Csg::footPoints(const double* x, const double* y, const double* z, const double* values,
                      std::size_t n, const FootQuery& query, FootPoints& out) const
 {
-    const std::size_t nc = mChildren.size();
-    if (nc == 1) {
+    if (mChildren.size() == 1) {
         mChildren[0]->footPoints(x, y, z, values, n, query, out);
         return;
     }
-    // In terms t_c = s_c f_c the node is rho * min_c t_c: a union of the sets {t_c < 0} (rho =
-    // 1), or the complement of one (rho = -1: an intersection is the complement of the union of
-    // the children's outsides, a difference A - B of A's outside and B). The surface, and so the
-    // distance up to its sign, is that of the union.
-    auto termSign = [this](std::size_t c) {
-        return mOp == Op::Union ? 1.0 : mOp == Op::Intersection ? -1.0 : (c == 0 ? -1.0 : 1.0);
-    };
+    CsgTerms terms(mChildren, mOp, x, y, z, n, query);
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
-    // Each child's distances: an exact SDF's are its values (its foot points are found only
-    // where a crease needs them); the others' come from their own foot points.
-    std::vector<std::array<double, kMaxBatch>> childValues(nc);
-    std::vector<std::unique_ptr<FootPoints>> feet(nc);
-    for (std::size_t c = 0; c < nc; ++c) {
-        mChildren[c]->values(x, y, z, childValues[c].data(), n);
-        if (mChildren[c]->isExactSdf()) continue;
-        feet[c] = std::make_unique<FootPoints>();
-        FootQuery childQuery = query;
-        childQuery.feet = true; // the creases start from them
-        mChildren[c]->footPoints(x, y, z, childValues[c].data(), n, childQuery, *feet[c]);
-    }
-    auto distanceOf = [&](std::size_t c, std::size_t i) {
-        return feet[c] ? feet[c]->distance[i] : childValues[c][i];
-    };
-    auto footOf = [&](std::size_t c, std::size_t i, Vec3d& q) {
-        if (feet[c]) {
-            q = Vec3d(feet[c]->x[i], feet[c]->y[i], feet[c]->z[i]);
-            return feet[c]->ok[i];
-        }
-        const Vec3d p(x[i], y[i], z[i]), g = mChildren[c]->gradient(p);
-        const double len = g.length();
-        q = p - g * (len > 0.0 ? childValues[c][i] / len : 0.0);
-        return len > 0.5 && len < 1.5; // an exact SDF's gradient is a unit vector
-    };
-    // Outside every term at q, within the tolerance (the terms in @a on excepted).
-    auto outsideOthers = [&](const Vec3d& q, std::initializer_list<std::size_t> on) {
-        for (std::size_t c = 0; c < nc; ++c) {
-            if (std::find(on.begin(), on.end(), c) != on.end()) continue;
-            if (termSign(c) * mChildren[c]->value(q) < -query.tolerance) return false;
-        }
-        return true;
-    };
-    std::vector<std::size_t> nearTerms;
     for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d p(x[i], y[i], z[i]);
         // The deciding term (by distance) and the next.
         std::size_t first = 0;
-        double u = termSign(0) * distanceOf(0, i), second = std::numeric_limits<double>::max();
-        bool allOk = !feet[0] || feet[0]->ok[i];
-        for (std::size_t c = 1; c < nc; ++c) {
-            const double d = termSign(c) * distanceOf(c, i);
-            allOk = allOk && (!feet[c] || feet[c]->ok[i]);
+        double u = terms.sign(0) * terms.distance(0, i), second = std::numeric_limits<double>::max();
+        bool allOk = terms.certified(0, i);
+        for (std::size_t c = 1; c < terms.size(); ++c) {
+            const double d = terms.sign(c) * terms.distance(c, i);
+            allOk = allOk && terms.certified(c, i);
             if (d < u) {
                 second = u;
                 u = d;
@@ -317,77 +411,22 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
                 second = d;
             }
         }
-        out.distance[i] = rho * u;
-        out.ok[i] = allOk;
+        Vec3d q(x[i], y[i], z[i]);
         // Outside every term, the nearest term's distance is the distance to the union; inside,
         // so is the deciding term's as long as no other term comes within it (its foot point
         // then lies outside the others: they are 1-Lipschitz). Also beyond the range asked for.
         if (!allOk || leadKeepsDistance(u, second, 0.0) || -u >= query.far) {
-            Vec3d q = p;
-            if (query.feet && !footOf(first, i, q)) out.ok[i] = false;
-            out.x[i] = q[0];
-            out.y[i] = q[1];
-            out.z[i] = q[2];
-            continue;
+            out.distance[i] = rho * u;
+            out.ok[i] = allOk;
+            if (query.feet && !terms.foot(first, i, q)) out.ok[i] = false;
+        } else {
+            double depth;
+            out.ok[i] = terms.nearestInside(i, u, depth, q);
+            out.distance[i] = rho * -depth;
         }
-
-        // Inside, near a crease: the nearest point of the union's surface is a term's foot point,
-        // a point of the crease of two terms or a corner of three, that lies outside every
-        // other term. Only terms whose surface is within reach can offer one.
-        nearTerms.clear();
-        for (std::size_t c = 0; c < nc; ++c) {
-            if (termSign(c) * distanceOf(c, i) < query.far) nearTerms.push_back(c);
-        }
-        // Nearest surfaces first: a crease (or corner) point of terms a and b is |p - q| >=
-        // |d_a| and >= |d_b| away (the distance to each surface is at most that), so once a
-        // term is as far as the best candidate so far, no later pair or corner can beat it.
-        std::sort(nearTerms.begin(), nearTerms.end(), [&](std::size_t l, std::size_t r) {
-            return std::abs(distanceOf(l, i)) < std::abs(distanceOf(r, i));
-        });
-        double best = std::numeric_limits<double>::max();
-        Vec3d foot = p;
-        bool complete = true; // every candidate was found
-        auto offer = [&](const Vec3d& q) {
-            const double d = (p - q).length();
-            if (d < best) best = d, foot = q;
-        };
-        for (std::size_t c : nearTerms) {
-            Vec3d q;
-            if (!footOf(c, i, q)) complete = false;
-            else if (outsideOthers(q, {c})) offer(q);
-        }
-        auto beyond = [&](std::size_t c) { return std::abs(distanceOf(c, i)) >= best; };
-        for (std::size_t a = 0; a < nearTerms.size() && !beyond(nearTerms[a]); ++a) {
-            for (std::size_t b = a + 1; b < nearTerms.size() && !beyond(nearTerms[b]); ++b) {
-                const std::size_t ca = nearTerms[a], cb = nearTerms[b];
-                Vec3d start, q;
-                footOf(ca, i, start);
-                if (!creasePoint(*mChildren[ca], *mChildren[cb], p, start, query.tolerance, q)) {
-                    complete = false;
-                    continue;
-                }
-                if (outsideOthers(q, {ca, cb})) offer(q);
-                // Where a third surface cuts this crease near q: a corner.
-                for (std::size_t k = b + 1; k < nearTerms.size() && !beyond(nearTerms[k]); ++k) {
-                    const std::size_t cc = nearTerms[k];
-                    Vec3d corner;
-                    if (cornerPoint({mChildren[ca].get(), mChildren[cb].get(), mChildren[cc].get()},
-                                    q, query.tolerance, corner) &&
-                        outsideOthers(corner, {ca, cb, cc})) {
-                        offer(corner);
-                    }
-                }
-            }
-        }
-        // Certified if every candidate was found, or the best reaches the lower bound |u| of the
-        // distance (inside the union the distance is at least the deepest term's depth).
-        out.ok[i] = best < std::numeric_limits<double>::max() &&
-                    (complete || best <= -u + query.tolerance);
-        const double depth = std::min(best, query.far);
-        out.distance[i] = rho * -depth;
-        out.x[i] = foot[0];
-        out.y[i] = foot[1];
-        out.z[i] = foot[2];
+        out.x[i] = q[0];
+        out.y[i] = q[1];
+        out.z[i] = q[2];
     }
 }
 

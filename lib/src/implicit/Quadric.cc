@@ -150,36 +150,32 @@ void Quadric::prepareFootPoints()
     mHasFrame = true;
 }
 
-// GCC cannot see that only the entries written are read.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
-void Quadric::footPoints(const double* x, const double* y, const double* z, const double* values,
-                         std::size_t n, const FootQuery& query, FootPoints& out) const
+namespace {
+
+/// A quadric in the eigenframe of its matrix A (primes): f = sum_i d_i q'_i^2 + 2 b'_i q'_i + c.
+/// The foot point q of p satisfies p - q = mu grad f(q) = 2 mu (A q + b), that is
+/// (1 + 2 mu d_i) q'_i = p'_i - 2 mu b'_i: q is a function of mu alone, and g(mu) = f(q(mu)) = 0
+/// is one equation in one unknown, solved by Newton's method. The nearest foot point has
+/// 1 + 2 mu d_i > 0 for every i, mu in (lo, hi); an iteration that leaves that region (near a
+/// medial axis) is not certified.
+struct EigenQuadric
 {
-    if (!mHasFrame || mIsPlaneSdf) {
-        Implicit::footPoints(x, y, z, values, n, query, out);
-        return;
+    double d0, d1, d2, b0, b1, b2, c;
+    double lo, hi;
+
+    EigenQuadric(const double eigen[3], const double linear[3], double constant)
+        : d0(eigen[0]), d1(eigen[1]), d2(eigen[2]), b0(linear[0]), b1(linear[1]), b2(linear[2]),
+          c(constant)
+    {
+        const double dMax = std::max({d0, d1, d2}), dMin = std::min({d0, d1, d2});
+        const double inf = std::numeric_limits<double>::infinity();
+        lo = dMax > 0.0 ? -0.5 / dMax : -inf;
+        hi = dMin < 0.0 ? -0.5 / dMin : inf;
     }
-    // The foot point q of p satisfies p - q = mu grad f(q) = 2 mu (A q + b). In the eigenframe of
-    // A (primes) that is (1 + 2 mu d_i) q'_i = p'_i - 2 mu b'_i: q is a function of mu alone,
-    // and g(mu) = f(q(mu)) = 0 is one equation in one unknown, solved by Newton's method from
-    // the first-order mu = f / |grad f|^2. It converges quadratically: two steps for all points
-    // (a loop the compiler vectorizes), more only where the surface curves strongly within the
-    // distance. The nearest foot point has 1 + 2 mu d_i > 0 for every i; an iteration that
-    // leaves that region (near a medial axis) is not certified.
-    const double c = mQ[3][3];
-    const double d0 = mEigen[0], d1 = mEigen[1], d2 = mEigen[2];
-    const double b0 = mLinear[0], b1 = mLinear[1], b2 = mLinear[2];
-    const double normA = std::max({std::abs(d0), std::abs(d1), std::abs(d2)});
-    // The multipliers with 1 + 2 mu d_i > 0 for every i.
-    const double dMax = std::max({d0, d1, d2}), dMin = std::min({d0, d1, d2});
-    const double inf = std::numeric_limits<double>::infinity();
-    const double lo = dMax > 0.0 ? -0.5 / dMax : -inf, hi = dMin < 0.0 ? -0.5 / dMin : inf;
-    double p0[kMaxBatch], p1[kMaxBatch], p2[kMaxBatch], mu[kMaxBatch], step[kMaxBatch];
-    // One Newton step for the point (a, b, e) in the eigenframe: mu moves, the step is returned.
-    auto newtonStep = [=](double a, double b, double e, double& u) {
+
+    /// One Newton step for the point (a, b, e) in the eigenframe: mu moves, the step is returned.
+    double newtonStep(double a, double b, double e, double& u) const
+    {
         const double i0 = 1.0 / (1.0 + 2.0 * u * d0), i1 = 1.0 / (1.0 + 2.0 * u * d1),
                      i2 = 1.0 / (1.0 + 2.0 * u * d2);
         const double q0 = (a - 2.0 * u * b0) * i0, q1 = (b - 2.0 * u * b1) * i1,
@@ -195,7 +191,49 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         const double s = u - next;
         u = next;
         return s;
-    };
+    }
+
+    /// The foot point (q0, q1, q2) for the multiplier @a u of the point (a, b, e), its distance,
+    /// and whether it is certified: on the surface within @a tol, inside (lo, hi), and its
+    /// distance within @a agreement of the first-order estimate @a est.
+    bool foot(double a, double b, double e, double u, double est, double tol, double agreement,
+              double& q0, double& q1, double& q2, double& dist) const
+    {
+        const double e0 = 1.0 + 2.0 * u * d0, e1 = 1.0 + 2.0 * u * d1, e2 = 1.0 + 2.0 * u * d2;
+        q0 = (a - 2.0 * u * b0) / e0;
+        q1 = (b - 2.0 * u * b1) / e1;
+        q2 = (e - 2.0 * u * b2) / e2;
+        const double g0 = 2.0 * (d0 * q0 + b0), g1 = 2.0 * (d1 * q1 + b1), g2 = 2.0 * (d2 * q2 + b2);
+        const double glq = std::sqrt(g0 * g0 + g1 * g1 + g2 * g2);
+        const double g = q0 * (d0 * q0 + 2.0 * b0) + q1 * (d1 * q1 + 2.0 * b1) +
+                         q2 * (d2 * q2 + 2.0 * b2) + c;
+        const double r0 = a - q0, r1 = b - q1, r2 = e - q2;
+        dist = std::sqrt(r0 * r0 + r1 * r1 + r2 * r2);
+        return std::min({e0, e1, e2}) > 0.0 && glq > 0.0 && std::abs(g) <= tol * glq &&
+               std::abs(dist - est) <= agreement * est + tol;
+    }
+};
+
+} // namespace
+
+// GCC cannot see that only the entries written are read.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+void Quadric::footPoints(const double* x, const double* y, const double* z, const double* values,
+                         std::size_t n, const FootQuery& query, FootPoints& out) const
+{
+    if (!mHasFrame || mIsPlaneSdf) {
+        Implicit::footPoints(x, y, z, values, n, query, out);
+        return;
+    }
+    // Newton's method on g(mu) (EigenQuadric) from the first-order mu = f / |grad f|^2. It
+    // converges quadratically: two steps for all points (a loop the compiler vectorizes), more
+    // only where the surface curves strongly within the distance.
+    const EigenQuadric q(mEigen, mLinear, mQ[3][3]);
+    const double normA = std::max({std::abs(q.d0), std::abs(q.d1), std::abs(q.d2)});
+    double p0[kMaxBatch], p1[kMaxBatch], p2[kMaxBatch], mu[kMaxBatch], step[kMaxBatch];
     // The points in the eigenframe, their gradients and first-order estimates (a loop that
     // vectorizes), then the ones near enough to need the foot point, compacted.
     double e[kMaxBatch], gl[kMaxBatch];
@@ -203,8 +241,8 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         p0[i] = mFrame[0][0] * x[i] + mFrame[1][0] * y[i] + mFrame[2][0] * z[i];
         p1[i] = mFrame[0][1] * x[i] + mFrame[1][1] * y[i] + mFrame[2][1] * z[i];
         p2[i] = mFrame[0][2] * x[i] + mFrame[1][2] * y[i] + mFrame[2][2] * z[i];
-        const double g0 = 2.0 * (d0 * p0[i] + b0), g1 = 2.0 * (d1 * p1[i] + b1),
-                     g2 = 2.0 * (d2 * p2[i] + b2);
+        const double g0 = 2.0 * (q.d0 * p0[i] + q.b0), g1 = 2.0 * (q.d1 * p1[i] + q.b1),
+                     g2 = 2.0 * (q.d2 * p2[i] + q.b2);
         gl[i] = std::sqrt(g0 * g0 + g1 * g1 + g2 * g2);
         e[i] = values[i] / gl[i];
     }
@@ -232,13 +270,13 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         p2[m] = p2[i];
         // The first-order multiplier, moved inside (lo, hi) if it is not.
         double u = v / (gl[i] * gl[i]);
-        u = u <= lo ? 0.5 * lo : u;
-        u = u >= hi ? 0.5 * hi : u;
+        u = u <= q.lo ? 0.5 * q.lo : u;
+        u = u >= q.hi ? 0.5 * q.hi : u;
         mu[m] = u;
         ++m;
     }
     for (int round = 0; round < 2; ++round) {
-        for (std::size_t k = 0; k < m; ++k) step[k] = newtonStep(p0[k], p1[k], p2[k], mu[k]);
+        for (std::size_t k = 0; k < m; ++k) step[k] = q.newtonStep(p0[k], p1[k], p2[k], mu[k]);
     }
     for (std::size_t k = 0; k < m; ++k) {
         // Further steps where the two were not enough (a surface curving within the distance):
@@ -246,33 +284,19 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         // leaves mu right to 1e-12 (and where neighbours stop after different numbers of steps
         // their distances differ by that much: far below what curvature can see).
         for (int it = 0; it < 12 && std::abs(step[k]) > 1e-6 * std::abs(mu[k]); ++it) {
-            step[k] = newtonStep(p0[k], p1[k], p2[k], mu[k]);
+            step[k] = q.newtonStep(p0[k], p1[k], p2[k], mu[k]);
         }
     }
     // The foot points (in the eigenframe), the distances and the certificates: a vectorized loop.
-    double q0[kMaxBatch], q1[kMaxBatch], q2[kMaxBatch], dist[kMaxBatch], good[kMaxBatch];
     // On an ellipsoid (A positive definite) g is strictly decreasing where every 1 + 2 mu d_i >
     // 0, and its one root there is the closest point: certified. Other quadrics also check the
     // distance against the first-order estimate, as the smooth iteration does.
-    const double agreement = d0 > 0.0 && d1 > 0.0 && d2 > 0.0 ? inf : 0.25;
+    double q0[kMaxBatch], q1[kMaxBatch], q2[kMaxBatch], dist[kMaxBatch], good[kMaxBatch];
+    const double agreement = q.d0 > 0.0 && q.d1 > 0.0 && q.d2 > 0.0
+                                 ? std::numeric_limits<double>::infinity() : 0.25;
     for (std::size_t k = 0; k < m; ++k) {
-        const double u = mu[k];
-        const double e0 = 1.0 + 2.0 * u * d0, e1 = 1.0 + 2.0 * u * d1, e2 = 1.0 + 2.0 * u * d2;
-        q0[k] = (p0[k] - 2.0 * u * b0) / e0;
-        q1[k] = (p1[k] - 2.0 * u * b1) / e1;
-        q2[k] = (p2[k] - 2.0 * u * b2) / e2;
-        const double g0 = 2.0 * (d0 * q0[k] + b0), g1 = 2.0 * (d1 * q1[k] + b1),
-                     g2 = 2.0 * (d2 * q2[k] + b2);
-        const double glq = std::sqrt(g0 * g0 + g1 * g1 + g2 * g2);
-        const double g = q0[k] * (d0 * q0[k] + 2.0 * b0) + q1[k] * (d1 * q1[k] + 2.0 * b1) +
-                         q2[k] * (d2 * q2[k] + 2.0 * b2) + c;
-        const double r0 = p0[k] - q0[k], r1 = p1[k] - q1[k], r2 = p2[k] - q2[k];
-        dist[k] = std::sqrt(r0 * r0 + r1 * r1 + r2 * r2);
-        const double est = std::abs(e[idx[k]]);
-        const bool ok = std::min({e0, e1, e2}) > 0.0 && glq > 0.0 &&
-                        std::abs(g) <= query.tolerance * glq &&
-                        std::abs(dist[k] - est) <= agreement * est + query.tolerance;
-        good[k] = ok ? 1.0 : 0.0;
+        good[k] = q.foot(p0[k], p1[k], p2[k], mu[k], std::abs(e[idx[k]]), query.tolerance,
+                         agreement, q0[k], q1[k], q2[k], dist[k]) ? 1.0 : 0.0;
     }
     for (std::size_t k = 0; k < m; ++k) {
         if (good[k] == 0.0) continue;

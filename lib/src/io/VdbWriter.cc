@@ -142,8 +142,9 @@ inline openvdb::Index64 notEqualBits(const openvdb::Vec3s* v, const openvdb::Vec
     openvdb::Index64 bits = 0;
     for (int k = 0; k < 64; ++k) {
         const openvdb::Vec3s& x = v[k];
-        const bool notA = !(x[0] == a[0]) | !(x[1] == a[1]) | !(x[2] == a[2]);
-        const bool notB = !(x[0] == b[0]) | !(x[1] == b[1]) | !(x[2] == b[2]);
+        // != is !(==) for floats, NaN included; ints and |, not ||, keep it branch-free.
+        const int notA = int(x[0] != a[0]) | int(x[1] != a[1]) | int(x[2] != a[2]);
+        const int notB = int(x[0] != b[0]) | int(x[1] != b[1]) | int(x[2] != b[2]);
         bits |= openvdb::Index64(notA & notB) << k;
     }
     return bits;
