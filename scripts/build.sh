@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 # Configure every time (quick when nothing changed) so tests and benchmarks are always on.
 # clang (scripts/deps.sh installs it; the sanitizer builds need it too) compiles this code base in
 # about half of gcc's time, for code as fast (docs/reliability.md#ci-time); CXX picks another.
-compiler=${CXX:-$(command -v clang++ || command -v c++)}
+compiler=$(command -v "${CXX:-clang++}" || command -v c++) # a full path, as CMake records it
 if [ -f build/CMakeCache.txt ] && ! grep -q "^CMAKE_CXX_COMPILER:[A-Z]*=$compiler\$" build/CMakeCache.txt; then
   rm -rf build/CMakeCache.txt build/CMakeFiles # configured with another compiler
 fi
