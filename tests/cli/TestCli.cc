@@ -355,3 +355,48 @@ TEST_F(TestCli, MeshScenes)
                 "missing mesh");
     EXPECT_EQ(listing(), before);
 }
+
+// `ivdb plan`: the partition as JSON and as text, against the grid `ivdb rasterize` makes.
+TEST_F(TestCli, PlanSplitsASceneOverRanks)
+{
+    const std::string scene = data("fig1_union.json");
+    RunResult r = run({"plan", scene, "--ranks", "3", "--json", "--voxel-size", "0.02"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    nlohmann::json j;
+    ASSERT_NO_THROW(j = nlohmann::json::parse(r.out)) << r.out;
+    EXPECT_EQ(j["ranks"], 3);
+    EXPECT_DOUBLE_EQ(j["voxel_size"].get<double>(), 0.02);
+    ASSERT_EQ(j["per_rank"].size(), 3u);
+    const std::uint64_t leaves = j["leaves"].get<std::uint64_t>();
+    std::uint64_t next = 0;
+    for (const auto& rank : j["per_rank"]) {
+        EXPECT_EQ(rank["first_leaf"].get<std::uint64_t>(), next);
+        next += rank["leaves"].get<std::uint64_t>();
+        EXPECT_EQ(rank["first_origin"].size(), 3u);
+        EXPECT_GT(rank["memory_bytes"].get<double>(), 0.0);
+    }
+    EXPECT_EQ(next, leaves);
+    EXPECT_GE(j["balance"].get<double>(), 1.0);
+    EXPECT_LE(j["balance"].get<double>(), 1.0 + 3.0 / double(leaves));
+
+    rasterize(scene, "union.vdb", {"--voxel-size", "0.02"});
+    const nlohmann::json grid = infoJson("union.vdb")["grids"][0];
+    const double active = grid["active_voxels"].get<double>();
+    EXPECT_GE(leaves, grid["leaf_nodes"].get<std::uint64_t>());
+    const double gridLeaves = grid["leaf_nodes"].get<double>();
+    EXPECT_NEAR(j["grid_leaves"].get<double>(), gridLeaves, 0.05 * gridLeaves);
+    EXPECT_NEAR(j["active_voxels"].get<double>(), active, 0.05 * active);
+
+    r = run({"plan", scene, "--ranks", "2"});
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    expectMentions(r.out, {"2 ranks", "balance", "leaves the band may cross", "active voxels"},
+                   "plan as text");
+
+    r = run({"plan", scene, "--ranks", "0"});
+    expectError(r, {"--ranks", "0"}, "plan with 0 ranks");
+    r = run({"plan", "missing.json", "--ranks", "2"});
+    expectError(r, {"missing.json"}, "plan of a missing scene");
+    r = run({"plan", scene});
+    EXPECT_EQ(r.exitCode, 2) << "plan without --ranks: " << r.err;
+    expectMentions(r.err, {"--ranks"}, "plan without --ranks");
+}

@@ -542,12 +542,14 @@ TEST_F(TestCliOptions, HelpOfEachCommandListsItsOwnOptions)
         {"glyphs", {"--output", "--stride", "--length", "--near", "0.5", "--grid"}},
         {"bench", {"--scene", "--resolutions", "--out", "--reps", "--quick", "--no-plot"}},
         {"convert", {"--output", "--grid", "--compression", "--half", ".nvdb"}},
+        {"plan", {"--ranks", "--voxel-size", "--half-width", "--json", "file order"}},
     };
     // Options that belong to another command, which a copied declaration would drag along.
     const std::map<std::string, std::vector<std::string>> foreign = {
         {"csg", {"--tolerance", "-p FLOAT"}}, {"mesh", {"--float", "--stride"}},
         {"render", {"--adaptivity", "--stride"}}, {"glyphs", {"--colormap", "--adaptivity"}},
         {"bench", {"--output", "--fog"}}, {"blend", {"--adaptivity"}}, {"convert", {"--fog"}},
+        {"plan", {"--output", "--sampling"}},
     };
     for (const auto& [command, options] : expected) {
         for (const char* flag : {"--help", "-h"}) {

@@ -5,6 +5,7 @@
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/levelset/Dilate.h>
 #include <ivdb/ops/Blend.h>
 #include <ivdb/ops/Csg.h>
 #include <ivdb/raster/Rasterize.h>
@@ -16,6 +17,7 @@
 #include <openvdb/tools/Composite.h>
 #include <openvdb/tools/GridOperators.h>
 #include <openvdb/tools/LevelSetSphere.h>
+#include <openvdb/tools/Morphology.h>
 
 #include <benchmark/benchmark.h>
 
@@ -227,10 +229,42 @@ void BM_BlendUnion(benchmark::State& state)
     if (!notes.empty()) state.SetLabel(notes.front());
 }
 
+// Growing the band of one sphere of the pair (radius 100 voxels) by range(0) voxels, corners
+// included, as the grid blend grows its masks: levelset::dilatedBox against OpenVDB's repeated
+// one-voxel dilation (the same voxels; tests/levelset/TestDilate.cc).
+openvdb::MaskTree benchBandMask()
+{
+    openvdb::MaskTree mask;
+    mask.topologyUnion(benchPair(100).first->tree());
+    return mask;
+}
+
+void BM_DilateBox(benchmark::State& state)
+{
+    const openvdb::MaskTree mask = benchBandMask();
+    for (auto _ : state) {
+        benchmark::DoNotOptimize(levelset::dilatedBox(mask, int(state.range(0))).get());
+    }
+}
+
+void BM_OpenVDB_Dilate(benchmark::State& state)
+{
+    const openvdb::MaskTree mask = benchBandMask();
+    for (auto _ : state) {
+        openvdb::MaskTree grown(mask);
+        openvdb::tools::dilateActiveValues(grown, int(state.range(0)),
+                                           openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                           openvdb::tools::EXPAND_TILES);
+        benchmark::DoNotOptimize(grown.leafCount());
+    }
+}
+
 } // namespace
 
 BENCHMARK(BM_CsgUnion)->Arg(100)->Arg(200)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OpenVDB_CsgUnion)->Arg(100)->Arg(200)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_DilateBox)->Arg(3)->Arg(10)->Arg(30)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_OpenVDB_Dilate)->Arg(3)->Arg(10)->Arg(30)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_BlendUnion)->Args({100, 1000})->Args({200, 1000})->Args({400, 1000})->Args({100, 80})
     ->Args({200, 160})->Args({400, 320})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_GradientAlternating)->Arg(400)->Iterations(6)->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -233,6 +233,7 @@ int run(int argc, char** argv)
         addGlyphs(app, action);
         addRender(app, action);
         addConvert(app, action);
+        addPlan(app, action);
         addBench(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {

@@ -80,6 +80,7 @@ void addMesh(CLI::App& app, Action& action);
 void addGlyphs(CLI::App& app, Action& action);
 void addRender(CLI::App& app, Action& action);
 void addConvert(CLI::App& app, Action& action);
+void addPlan(CLI::App& app, Action& action);
 /// @}
 
 /// @brief Progress on stderr when it is a terminal, and cancellation: between start() and end()

@@ -3,8 +3,9 @@
 
 #include <ivdb/util/Interrupt.h>
 
+#include "Sweeping.h"
+
 #include <openvdb/tools/ChangeBackground.h>
-#include <openvdb/tools/FastSweeping.h>
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tree/LeafManager.h>
 
@@ -74,21 +75,18 @@ MaskTree interfaceVoxels(const FloatTree& tree)
 /// their own estimates from @a samples. Null when there is nothing to sweep.
 openvdb::FloatGrid::Ptr sweep(const openvdb::FloatGrid& samples)
 {
-    openvdb::tools::FastSweeping<openvdb::FloatGrid> sweeper;
-    if (!sweeper.initSdf(samples, 0.0f, /*isInputSdf=*/true)) return nullptr;
-    openvdb::FloatGrid::Ptr out = sweeper.sdfGrid();
     const float frozen = 0.5f * std::numeric_limits<float>::max();
-    openvdb::tree::LeafManager<FloatTree> leaves(out->tree());
-    leaves.foreach([&](LeafT& leaf, size_t) {
-        const LeafT* src = samples.tree().probeConstLeaf(leaf.origin());
-        if (!src) return;
-        float* buf = leaf.buffer().data();
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            if (std::abs(*it) < frozen) buf[it.pos()] = src->getValue(it.pos());
-        }
+    return detail::sweepSdf(samples, [&](openvdb::FloatGrid& out) {
+        openvdb::tree::LeafManager<FloatTree> leaves(out.tree());
+        leaves.foreach([&](LeafT& leaf, size_t) {
+            const LeafT* src = samples.tree().probeConstLeaf(leaf.origin());
+            if (!src) return;
+            float* buf = leaf.buffer().data();
+            for (auto it = leaf.beginValueOn(); it; ++it) {
+                if (std::abs(*it) < frozen) buf[it.pos()] = src->getValue(it.pos());
+            }
+        });
     });
-    if (sweeper.sweepingVoxelCount() > 0) sweeper.sweep(1);
-    return sweeper.sdfGrid();
 }
 
 /// Trim @a out to the band: |d| < @a bg, everything else +/- bg by sign. Within @a keep of the

@@ -3,12 +3,14 @@
 
 #include <ivdb/diff/Differential.h>
 #include <ivdb/implicit/Blend.h>
+#include <ivdb/levelset/Dilate.h>
 #include <ivdb/levelset/Redistance.h>
 #include <ivdb/util/Interrupt.h>
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
-#include <openvdb/tools/FastSweeping.h>
+#include "../levelset/Sweeping.h"
+
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
@@ -46,16 +48,14 @@ MaskTree::Ptr leafMask(const TreeT& tree)
 void dilateLeaves(MaskTree& mask, int steps) // steps voxels of the mask (leaves or voxels)
 {
     if (steps <= 0) return;
-    openvdb::tools::dilateActiveValues(mask, steps, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                       openvdb::tools::EXPAND_TILES);
-    mask.voxelizeActiveTiles();
+    const MaskTree::Ptr grown = levelset::dilatedBox(mask, steps);
+    mask.clear();
+    mask.merge(*grown);
 }
 
-MaskTree::Ptr dilatedCopy(const MaskTree& mask, int leaves)
+MaskTree::Ptr dilatedCopy(const MaskTree& mask, int steps)
 {
-    auto out = std::make_shared<MaskTree>(mask);
-    dilateLeaves(*out, leaves);
-    return out;
+    return levelset::dilatedBox(mask, steps);
 }
 
 std::vector<Coord> leafOrigins(const MaskTree& mask)
@@ -284,7 +284,7 @@ openvdb::FloatGrid::Ptr extendBySweeping(const openvdb::FloatGrid& grid, const M
         }
     }
     if (dilation <= 0 || clip->tree().activeVoxelCount() == 0) return clip;
-    return openvdb::tools::dilateSdf(*clip, dilation, openvdb::tools::NN_FACE_EDGE_VERTEX);
+    return levelset::detail::dilateSdf(*clip, dilation);
 }
 
 // Closest-point propagation loses accuracy where fronts from opposite sides meet (a medial

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/raster/Rasterize.h>
+#include <ivdb/raster/Partition.h>
 
 #include "Distances.h"
 
@@ -24,6 +25,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -295,13 +297,6 @@ void checkSparseMemory(const Context& ctx, const std::vector<Task>& level2)
 {
     if (level2.empty()) return;
     const int d2 = Int2T::DIM, d1 = Int1T::DIM, d0 = LeafT::DIM;
-    // The level-1 task list itself: 24 bytes per 128^3 node of every straddling 4096^3 node.
-    if (double(level2.size()) * double((d2 / d1) * (d2 / d1) * (d2 / d1)) > 2e8) {
-        OPENVDB_THROW(openvdb::RuntimeError, "the surface crosses " +
-            std::to_string(level2.size()) + " nodes of 4096^3 voxels at voxel size " +
-            util::formatNumber(ctx.dx) + ", too many to visit: use a larger voxel size or "
-            "smaller bounds");
-    }
     const size_t sample2 = std::min<size_t>(level2.size(), 8);
     std::vector<Task> straddling1; // in the sampled level-2 nodes
     for (size_t s = 0; s < sample2; ++s) {
@@ -426,18 +421,14 @@ void assembleTree(FloatTree& tree, std::vector<Level1Result>& results,
     for (const Coord& o2 : insideLevel2) tree.root().addTile(o2, -bg, false);
 }
 
-/// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels), with 32^3
-/// blocks between the last two.
-openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx, Counts& counts)
+/// The sparse descent's first two levels: the straddling 4096^3 nodes (serial: few), then the
+/// 128^3 children of each that overlap the region, in file order; the 4096^3 nodes wholly
+/// inside go to @a insideLevel2. With @a checkMemory, refuses a grid that would not fit.
+std::vector<Task> level1Tasks(const Context& ctx, std::vector<Coord>& insideLevel2,
+                              bool checkMemory)
 {
-    const float bg = static_cast<float>(ctx.band);
-    auto grid = openvdb::FloatGrid::create(bg);
-    grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
     const int d2 = Int2T::DIM, d1 = Int1T::DIM;
-
-    // Level 2 (4096^3): few nodes, serial.
     std::vector<Task> straddling2;
-    std::vector<Coord> insideLevel2;
     forEachCube(ctx.region, d2, [&](const Coord& o) {
         const CoordBBox box2 = CoordBBox::createCube(o, d2);
         const Verdict v = ctx.classify(*ctx.shape, box2);
@@ -445,14 +436,33 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx, Counts& counts)
         if (v == Verdict::Straddle) straddling2.push_back({o, ctx.shape->prune(ctx.dilatedWorldBox(box2))});
     });
     util::checkInterrupt(ctx.interrupter, 0);
-    checkSparseMemory(ctx, straddling2);
-    // Level-1 children of each straddling level-2 node that overlap the region.
+    // The level-1 task list itself: 24 bytes per 128^3 node of every straddling 4096^3 node.
+    if (double(straddling2.size()) * double((d2 / d1) * (d2 / d1) * (d2 / d1)) > 2e8) {
+        OPENVDB_THROW(openvdb::RuntimeError, "the surface crosses " +
+            std::to_string(straddling2.size()) + " nodes of 4096^3 voxels at voxel size " +
+            util::formatNumber(ctx.dx) + ", too many to visit: use a larger voxel size or "
+            "smaller bounds");
+    }
+    if (checkMemory) checkSparseMemory(ctx, straddling2);
     std::vector<Task> tasks;
     for (const Task& t2 : straddling2) {
         forEachCube(clipped(t2.origin, d2, ctx.region), d1,
                     [&](const Coord& o) { tasks.push_back({o, t2.node}); });
     }
     util::checkInterrupt(ctx.interrupter, 0);
+    return tasks;
+}
+
+/// Sparse path: interval descent over OpenVDB's node sizes (4096, 128, 8 voxels), with 32^3
+/// blocks between the last two.
+openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx, Counts& counts)
+{
+    const float bg = static_cast<float>(ctx.band);
+    auto grid = openvdb::FloatGrid::create(bg);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
+
+    std::vector<Coord> insideLevel2;
+    const std::vector<Task> tasks = level1Tasks(ctx, insideLevel2, true);
 
     // Level 1 (128^3) in parallel: each task builds a whole internal node of leaves.
     std::vector<Level1Result> results(tasks.size());
@@ -914,6 +924,160 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
         settings.stats->sweptDistances = counts.unknown.size();
     }
     return grid;
+}
+
+namespace {
+
+/// The leaves the band may cross in one 128^3 node, by the descent's interval tests alone (no
+/// voxel is evaluated), in file order: by offset in the node, which is x, then y, then z.
+std::vector<Coord> straddlingLeaves(const Context& ctx, const Task& task)
+{
+    std::vector<Coord> out;
+    const int d1 = Int1T::DIM, d0 = LeafT::DIM;
+    const CoordBBox box1 = CoordBBox::createCube(task.origin, d1);
+    if (ctx.classify(*task.node, box1) != Verdict::Straddle) return out;
+    const Implicit::Ptr node1 = task.node->prune(ctx.dilatedWorldBox(box1));
+    const CoordBBox sub = clipped(task.origin, d1, ctx.region);
+    forEachCube(sub, kBlock, [&](const Coord& o) {
+        const CoordBBox block = CoordBBox::createCube(o, kBlock);
+        if (ctx.classify(*node1, block) != Verdict::Straddle) return;
+        CoordBBox part = block;
+        part.intersect(sub);
+        const Implicit::Ptr nodeB = node1->prune(ctx.dilatedWorldBox(block));
+        forEachCube(part, d0, [&](const Coord& l) {
+            if (ctx.classify(*nodeB, CoordBBox::createCube(l, d0)) == Verdict::Straddle) {
+                out.push_back(l);
+            }
+        });
+    });
+    std::sort(out.begin(), out.end()); // Coord's order is lexicographic: x, then y, then z
+    return out;
+}
+
+/// The straddling leaves of every 128^3 node in file order, with prefix counts to find the
+/// leaf of a given index.
+struct LeafIndex
+{
+    std::vector<Task> tasks;
+    std::vector<std::vector<Coord>> leaves;  // per task
+    std::vector<std::uint64_t> start;        // index of each task's first leaf; then the total
+    std::vector<std::uint64_t> nodesBefore;  // tasks with leaves before each task
+    std::vector<std::uint64_t> level2Of;     // each task's 4096^3 node, counted in file order
+
+    explicit LeafIndex(const Context& ctx)
+    {
+        std::vector<Coord> inside;
+        tasks = level1Tasks(ctx, inside, false);
+        leaves.resize(tasks.size());
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, tasks.size(), 1),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t t = r.begin(); t != r.end(); ++t) leaves[t] = straddlingLeaves(ctx, tasks[t]);
+        });
+        start.assign(tasks.size() + 1, 0);
+        nodesBefore.assign(tasks.size() + 1, 0);
+        level2Of.assign(tasks.size(), 0);
+        const int d2 = Int2T::DIM;
+        for (size_t t = 0; t < tasks.size(); ++t) {
+            start[t + 1] = start[t] + leaves[t].size();
+            nodesBefore[t + 1] = nodesBefore[t] + (leaves[t].empty() ? 0 : 1);
+            const bool sameParent = t > 0 && Coord(alignDown(tasks[t].origin.x(), d2),
+                alignDown(tasks[t].origin.y(), d2), alignDown(tasks[t].origin.z(), d2)) ==
+                Coord(alignDown(tasks[t - 1].origin.x(), d2), alignDown(tasks[t - 1].origin.y(), d2),
+                      alignDown(tasks[t - 1].origin.z(), d2));
+            level2Of[t] = t == 0 ? 0 : level2Of[t - 1] + (sameParent ? 0 : 1);
+        }
+    }
+
+    std::uint64_t count() const { return start.back(); }
+
+    /// The task holding leaf @a i.
+    size_t taskOf(std::uint64_t i) const
+    {
+        return size_t(std::upper_bound(start.begin(), start.end(), i) - start.begin()) - 1;
+    }
+
+    const Coord& leaf(std::uint64_t i) const
+    {
+        const size_t t = taskOf(i);
+        return leaves[t][i - start[t]];
+    }
+};
+
+/// Bytes of the grid's nodes for @a leaves leaves under @a level1 128^3 and @a level2 4096^3
+/// nodes: each leaf's values and masks, each internal node's table.
+double gridBytes(double leaves, double level1, double level2)
+{
+    return leaves * double(sizeof(LeafT) + LeafT::SIZE * sizeof(float)) +
+           level1 * double(sizeof(Int1T)) + level2 * double(sizeof(Int2T));
+}
+
+} // namespace
+
+Partition partition(const Implicit::Ptr& shape, const RasterSettings& settings, int ranks,
+                    int sampleLeaves)
+{
+    check(limits::kRanks, double(ranks));
+    const Context ctx = makeContext(shape, settings);
+    const LeafIndex index(ctx);
+    Partition out;
+    out.leaves = index.count();
+    const std::uint64_t n = out.leaves;
+
+    // Leaves evenly spread in file order, built as the rasterizer builds them, on this thread.
+    const std::uint64_t samples = std::min<std::uint64_t>(n, std::uint64_t(std::max(sampleLeaves, 1)));
+    double active = 0.0, seconds = 0.0, built = 0.0;
+    std::uint64_t jitter = 0x9E3779B97F4A7C15ull; // a fixed sequence: the same plan every run
+    for (std::uint64_t s = 0; s < samples; ++s) {
+        // One leaf at a pseudo-random place in each of `samples` equal stretches: evenly spread,
+        // without lining up with the nodes' own periods.
+        jitter = jitter * 6364136223846793005ull + 1442695040888963407ull;
+        const double u = double(jitter >> 11) * 0x1.0p-53;
+        const std::uint64_t i = std::min<std::uint64_t>(n - 1, std::uint64_t((double(s) + u) *
+                                                                            double(n) / double(samples)));
+        const Coord& o = index.leaf(i);
+        const auto begin = std::chrono::steady_clock::now();
+        const Implicit::Ptr node =
+            index.tasks[index.taskOf(i)].node->prune(ctx.dilatedWorldBox(CoordBBox::createCube(o, LeafT::DIM)));
+        Counts counts;
+        bool inside = false;
+        std::unique_ptr<LeafT> leaf(buildLeaf(ctx, *node, o, inside, &counts));
+        seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+        if (leaf) active += double(leaf->onVoxelCount()), built += 1.0;
+    }
+    out.sampledLeaves = samples;
+    const double activePerLeaf = samples ? active / double(samples) : 0.0;
+    const double secondsPerLeaf = samples ? seconds / double(samples) : 0.0;
+    // Not every leaf the band may cross holds a band voxel (most do for exact distances; the
+    // test for the others reaches a voxel further): the grid keeps the sampled share.
+    const double kept = samples ? built / double(samples) : 0.0;
+    out.gridLeaves = kept * double(n);
+    out.activeVoxels = activePerLeaf * double(n);
+    out.cpuSeconds = secondsPerLeaf * double(n);
+    out.memoryBytes = gridBytes(kept * double(n), double(index.nodesBefore.back()),
+                                n ? double(index.level2Of.back() + 1) : 0.0);
+
+    // Contiguous runs of floor(n / ranks) or one more leaves.
+    out.ranks.resize(size_t(ranks));
+    std::uint64_t most = 0;
+    for (int r = 0; r < ranks; ++r) {
+        RankShare& share = out.ranks[size_t(r)];
+        const std::uint64_t a = n * std::uint64_t(r) / std::uint64_t(ranks);
+        const std::uint64_t b = n * std::uint64_t(r + 1) / std::uint64_t(ranks);
+        share.firstLeaf = a;
+        share.leaves = b - a;
+        most = std::max(most, share.leaves);
+        if (share.leaves == 0) continue;
+        const size_t ta = index.taskOf(a), tb = index.taskOf(b - 1);
+        share.first = index.leaf(a);
+        share.last = index.leaf(b - 1);
+        share.activeVoxels = activePerLeaf * double(share.leaves);
+        share.cpuSeconds = secondsPerLeaf * double(share.leaves);
+        share.memoryBytes = gridBytes(kept * double(share.leaves),
+                                      double(index.nodesBefore[tb + 1] - index.nodesBefore[ta]),
+                                      double(index.level2Of[tb] - index.level2Of[ta] + 1));
+    }
+    out.balance = n ? double(most) / (double(n) / double(ranks)) : 1.0;
+    return out;
 }
 
 } // namespace ivdb::raster

@@ -2,6 +2,7 @@
 #include <ivdb/scene/Scene.h>
 
 #include "KeyedValues.h"
+#include "../levelset/Sweeping.h"
 
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
@@ -16,7 +17,6 @@
 
 #include <openvdb/Exceptions.h>
 #include <openvdb/tools/ChangeBackground.h>
-#include <openvdb/tools/FastSweeping.h>
 #include <openvdb/tools/LevelSetRebuild.h>
 
 #include <nlohmann/json.hpp>
@@ -451,7 +451,7 @@ Implicit::Ptr buildVdb(ObjectReader& r, const std::string& type, const Node& nod
     const double halfWidth = build.band + build.margin;
     const int missing = int(std::ceil(halfWidth - double(grid->background()) / dx - 1e-6));
     if (!moved && missing > 0) {
-        grid = openvdb::tools::dilateSdf(*grid, missing, openvdb::tools::NN_FACE_EDGE_VERTEX);
+        grid = levelset::detail::dilateSdf(*grid, missing);
         openvdb::tools::changeLevelSetBackground(grid->tree(), float(halfWidth * dx));
     } else if (moved) {
         std::ostringstream os;

@@ -101,6 +101,7 @@ inline constexpr Param kHalf{"half", "half floats"};
 inline constexpr Param kFrames{"frames", "frame range"};
 inline constexpr Param kColumns{"columns", "contact sheet columns"};
 inline constexpr Param kParallelFrames{"parallel_frames", "frames made at once"};
+inline constexpr Param kRanks{"ranks", "number of ranks"};
 } // namespace param
 
 namespace limits {
@@ -131,6 +132,8 @@ inline constexpr Limit kLength{param::kLength, 0.0, kInf, false, false, "",
 inline constexpr Limit kNear{param::kNear, 0.0, kInf, true, false, "voxels"};
 /// Image width and height, pixels.
 inline constexpr Limit kImageSide{param::kImageSize, 1.0, 16384.0, false, false, "pixels"};
+/// Ranks (processes) a rasterization is split over.
+inline constexpr Limit kRanks{param::kRanks, 1.0, 100000.0};
 /// Tiles across a contact sheet, and tiles in one.
 inline constexpr Limit kColumns{param::kColumns, 1.0, 64.0};
 inline constexpr Limit kSheetTiles{param::kFrames, 1.0, 1024.0, false, false, "frames"};
