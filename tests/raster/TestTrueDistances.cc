@@ -240,11 +240,13 @@ TEST_F(TestTrueDistances, DataScenesNeedNoSweeping)
         ASSERT_GT(total, 0.0) << name;
         EXPECT_EQ(stats.sweptDistances, 0u) << name;
         // A mesh's distances are those of its flat facets, not smooth where facets meet: the
-        // smooth iteration of a blend with it leaves 1.5% to the lattice search.
+        // smooth iteration of a blend with it leaves 3.1% of the voxels the descent hands over
+        // to the lattice search, 1.5% of them approximate (the share was 1.5% and 0.26% when a
+        // loose interval bound for meshes also handed over 6 times as many easy voxels).
         const bool mesh = sc.json.find("\"mesh\"") != std::string::npos;
         EXPECT_LT(double(stats.searchedDistances + stats.approximateDistances) / total,
-                  mesh ? 0.02 : 0.01) << name;
-        EXPECT_LT(double(stats.approximateDistances) / total, 0.005) << name;
+                  mesh ? 0.04 : 0.01) << name;
+        EXPECT_LT(double(stats.approximateDistances) / total, mesh ? 0.02 : 0.005) << name;
         ++scenes;
     }
     EXPECT_GE(scenes, 8u);

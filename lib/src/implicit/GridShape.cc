@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace ivdb::implicit {
 
@@ -101,6 +102,13 @@ GridShape::GridShape(openvdb::FloatGrid::ConstPtr grid, std::string name)
         const openvdb::Coord lo = active.min().offsetBy(-1), hi = active.max().offsetBy(1);
         mBox = BBoxd(Vec3d(lo.x(), lo.y(), lo.z()) * mDx, Vec3d(hi.x(), hi.y(), hi.z()) * mDx);
     }
+    for (auto leaf = mGrid->tree().cbeginLeaf(); leaf; ++leaf) {
+        const float* v = leaf->buffer().data();
+        const auto [lo, hi] = std::minmax_element(v, v + leaf->SIZE);
+        const openvdb::Coord cell = leaf->origin() >> 3;
+        mLeafMin.setValue(cell, *lo);
+        mLeafMax.setValue(cell, *hi);
+    }
 }
 
 bool GridShape::far(const Vec3d& q) const
@@ -153,6 +161,44 @@ void GridShape::gradients(const double* x, const double* y, const double* z, dou
     }
 }
 
+void GridShape::sampleRange(const openvdb::Coord& lo, const openvdb::Coord& hi, double& min,
+                            double& max) const
+{
+    min = std::numeric_limits<double>::infinity();
+    max = -min;
+    const Accessor acc(mGrid->tree());
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> minAcc(mLeafMin), maxAcc(mLeafMax);
+    const openvdb::Coord ext = hi - lo;
+    if (ext.x() <= 20 && ext.y() <= 20 && ext.z() <= 20) { // a leaf's box or so: every voxel
+        for (int x = lo.x(); x <= hi.x(); ++x) {
+            for (int y = lo.y(); y <= hi.y(); ++y) {
+                for (int z = lo.z(); z <= hi.z(); ++z) {
+                    const double v = acc.getValue(openvdb::Coord(x, y, z));
+                    min = std::min(min, v);
+                    max = std::max(max, v);
+                }
+            }
+        }
+        return;
+    }
+    const openvdb::Coord a = lo >> 3, b = hi >> 3; // arithmetic shifts: floor division by 8
+    for (int x = a.x(); x <= b.x(); ++x) {
+        for (int y = a.y(); y <= b.y(); ++y) {
+            for (int z = a.z(); z <= b.z(); ++z) {
+                const openvdb::Coord cell(x, y, z);
+                float l, h;
+                if (minAcc.probeValue(cell, l)) {
+                    h = maxAcc.getValue(cell);
+                } else { // no leaf: a tile or the background holds the whole cell
+                    l = h = acc.getValue(openvdb::Coord(x * 8, y * 8, z * 8));
+                }
+                min = std::min(min, double(l));
+                max = std::max(max, double(h));
+            }
+        }
+    }
+}
+
 Interval GridShape::interval(const BBoxd& box) const
 {
     // The samples change by at most one voxel size per voxel along each axis, so each component
@@ -163,7 +209,31 @@ Interval GridShape::interval(const BBoxd& box) const
     // (With a margin for the samples' float rounding.)
     const double lipschitz = std::sqrt(3.0) * 1.5 * 1.25 * 1.25;
     const double h = lipschitz * 0.5 * (box.max() - box.min()).length() * (1.0 + 1e-4) + 1e-5 * mDx;
-    return {std::max(-mBackground, v - h), std::min(mBackground, v + h)};
+    double lo = std::max(-mBackground, v - h), hi = std::min(mBackground, v + h);
+    // Tighter for boxes of a few voxels: the interpolation reads the voxels from floor(q) - 1 to
+    // floor(q) + 2 around each point q; its weights sum to 1, and their magnitudes to at most
+    // 1.25 along each axis (the negative lobes sum to -1/8), so the value is within 1.25^3 times
+    // the samples' half range of their middle. The samples' range comes from whole leaves.
+    const Vec3d qlo = box.min() * mInvDx, qhi = box.max() * mInvDx;
+    // Only for boxes of a few voxels and more (the descent's), where the Lipschitz bound is
+    // loosest: for the tiny boxes of the distance searches it is as tight and cheaper.
+    const double diagonal = (qhi - qlo).length();
+    const bool small = diagonal >= 4.0 && diagonal <= 48.0 && std::abs(qlo[0]) < 1e9 &&
+                       std::abs(qlo[1]) < 1e9 && std::abs(qlo[2]) < 1e9;
+    if (small) {
+        openvdb::Coord a, b;
+        for (int i = 0; i < 3; ++i) {
+            a[i] = int(std::floor(qlo[i])) - 1;
+            b[i] = int(std::floor(qhi[i])) + 2;
+        }
+        double min, max;
+        sampleRange(a, b, min, max);
+        const double mid = 0.5 * (min + max);
+        const double half = 0.5 * (max - min) * 1.953125 * (1.0 + 1e-9) + 1e-9 * mDx;
+        lo = std::max(lo, mid - half);
+        hi = std::min(hi, mid + half);
+    }
+    return {std::min(lo, hi), std::max(lo, hi)};
 }
 
 BBoxd GridShape::boundingBox() const { return mBox; }

@@ -51,12 +51,17 @@ private:
     /// interpolation's reach: there the value is the background.
     bool far(const Vec3d& q) const;
     double clamp(double v) const { return std::max(-mBackground, std::min(mBackground, v)); }
+    /// The range of the samples in index box [@a lo, @a hi]: every voxel's for a box of up to
+    /// 21 voxels a side, else each leaf's (or tile's) smallest and largest value (wider).
+    void sampleRange(const openvdb::Coord& lo, const openvdb::Coord& hi, double& min,
+                     double& max) const;
 
     openvdb::FloatGrid::ConstPtr mGrid;
     std::string mName;
     double mDx, mInvDx, mBackground;
     BBoxd mBox;
     Vec3d mIndexLo, mIndexHi; // the tree's index range, grown by three voxels
+    openvdb::FloatTree mLeafMin, mLeafMax; // each leaf's values' range, at (origin / 8)
 };
 
 } // namespace ivdb::implicit
