@@ -42,10 +42,11 @@ struct Partition
 /// @details The sparse path's interval descent, down to the leaves, finds every leaf the band
 /// may cross without evaluating a voxel (a superset of the grid's leaves: for shapes that are
 /// not exact distances the test reaches a voxel beyond the band); these leaves are the unit of
-/// work, since the rasterizer evaluates each of them. Up to @a sampleLeaves
-/// of them, evenly spread in file order, are built as the rasterizer builds them, on one thread,
-/// to estimate active voxels, compute time per leaf and the share of leaves the grid keeps;
-/// memory counts the kept leaves and the internal nodes above them. The cost grows with the surface (the leaves), not with @a ranks.
+/// work, since the rasterizer evaluates each of them. Up to @a sampleLeaves of them, one in
+/// each of as many equal stretches of the file order (at a fixed pseudo-random place in it), are
+/// built as the rasterizer builds them, on one thread, to estimate active voxels, compute time
+/// per leaf and the share of leaves the grid keeps; memory counts the kept leaves and the
+/// internal nodes above them. The cost grows with the surface (the leaves), not with @a ranks.
 /// @throw ParamError for a bad voxel size, half width or @a ranks (limits::kRanks)
 /// @throw openvdb::ValueError for an unbounded shape without bounds, or one far too large
 Partition partition(const implicit::Implicit::Ptr& shape, const RasterSettings& settings,
