@@ -365,20 +365,18 @@ bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Imp
     return any;
 }
 
-/// One 128^3 node of the sparse path: its 32^3 blocks, then their leaves.
-Level1Result buildLevel1(const Context& ctx, const Task& task, Counts& counts)
+/// The descent below one 128^3 node (the rasterizer's and the partition's): the node's verdict,
+/// and if it straddles, @a onBlock(part, node) for each of its 32^3 blocks that is not outside,
+/// with the block's part of the region and the shape pruned to it (null: the block is inside).
+template<typename Fn>
+Verdict descendLevel1(const Context& ctx, const Task& task, Fn&& onBlock)
 {
-    Level1Result res;
-    res.origin = task.origin;
     const int d1 = Int1T::DIM;
     const CoordBBox box1 = CoordBBox::createCube(task.origin, d1);
     const Verdict v1 = ctx.classify(*task.node, box1);
-    res.inside = v1 == Verdict::Inside;
-    if (v1 != Verdict::Straddle) return res;
+    if (v1 != Verdict::Straddle) return v1;
     const Implicit::Ptr node1 = task.node->prune(ctx.dilatedWorldBox(box1));
-    auto int1 = std::make_unique<Int1T>(task.origin, static_cast<float>(ctx.band));
     const CoordBBox sub = clipped(task.origin, d1, ctx.region);
-    bool any = false;
     // Blocks of 4^3 leaves in between: a leaf then tests the few primitives near its block
     // instead of the hundreds near its 128^3 node (1000 spheres: ~3x faster).
     forEachCube(sub, kBlock, [&](const Coord& o) {
@@ -388,12 +386,27 @@ Level1Result buildLevel1(const Context& ctx, const Task& task, Counts& counts)
         CoordBBox part = block;
         part.intersect(sub);
         if (vb == Verdict::Inside) {
-            any = fillBlock(ctx, *int1, part, nullptr, counts) || any;
+            onBlock(part, static_cast<const Implicit*>(nullptr));
             return;
         }
         const Implicit::Ptr nodeB = node1->prune(ctx.dilatedWorldBox(block));
-        any = fillBlock(ctx, *int1, part, nodeB.get(), counts) || any;
+        onBlock(part, static_cast<const Implicit*>(nodeB.get()));
     });
+    return v1;
+}
+
+/// One 128^3 node of the sparse path: its 32^3 blocks, then their leaves.
+Level1Result buildLevel1(const Context& ctx, const Task& task, Counts& counts)
+{
+    Level1Result res;
+    res.origin = task.origin;
+    std::unique_ptr<Int1T> int1;
+    bool any = false;
+    const Verdict v1 = descendLevel1(ctx, task, [&](const CoordBBox& part, const Implicit* node) {
+        if (!int1) int1 = std::make_unique<Int1T>(task.origin, static_cast<float>(ctx.band));
+        any = fillBlock(ctx, *int1, part, node, counts) || any;
+    });
+    res.inside = v1 == Verdict::Inside;
     if (any) res.node = int1.release();
     return res;
 }
@@ -933,21 +946,11 @@ namespace {
 std::vector<Coord> straddlingLeaves(const Context& ctx, const Task& task)
 {
     std::vector<Coord> out;
-    const int d1 = Int1T::DIM, d0 = LeafT::DIM;
-    const CoordBBox box1 = CoordBBox::createCube(task.origin, d1);
-    if (ctx.classify(*task.node, box1) != Verdict::Straddle) return out;
-    const Implicit::Ptr node1 = task.node->prune(ctx.dilatedWorldBox(box1));
-    const CoordBBox sub = clipped(task.origin, d1, ctx.region);
-    forEachCube(sub, kBlock, [&](const Coord& o) {
-        const CoordBBox block = CoordBBox::createCube(o, kBlock);
-        if (ctx.classify(*node1, block) != Verdict::Straddle) return;
-        CoordBBox part = block;
-        part.intersect(sub);
-        const Implicit::Ptr nodeB = node1->prune(ctx.dilatedWorldBox(block));
+    const int d0 = LeafT::DIM;
+    descendLevel1(ctx, task, [&](const CoordBBox& part, const Implicit* node) {
+        if (!node) return; // an inside block: tiles, no leaves
         forEachCube(part, d0, [&](const Coord& l) {
-            if (ctx.classify(*nodeB, CoordBBox::createCube(l, d0)) == Verdict::Straddle) {
-                out.push_back(l);
-            }
+            if (ctx.classify(*node, CoordBBox::createCube(l, d0)) == Verdict::Straddle) out.push_back(l);
         });
     });
     std::sort(out.begin(), out.end()); // Coord's order is lexicographic: x, then y, then z
@@ -977,14 +980,16 @@ struct LeafIndex
         nodesBefore.assign(tasks.size() + 1, 0);
         level2Of.assign(tasks.size(), 0);
         const int d2 = Int2T::DIM;
+        auto parent = [](const Coord& o) {
+            return Coord(alignDown(o.x(), d2), alignDown(o.y(), d2), alignDown(o.z(), d2));
+        };
         for (size_t t = 0; t < tasks.size(); ++t) {
             start[t + 1] = start[t] + leaves[t].size();
             nodesBefore[t + 1] = nodesBefore[t] + (leaves[t].empty() ? 0 : 1);
-            const bool sameParent = t > 0 && Coord(alignDown(tasks[t].origin.x(), d2),
-                alignDown(tasks[t].origin.y(), d2), alignDown(tasks[t].origin.z(), d2)) ==
-                Coord(alignDown(tasks[t - 1].origin.x(), d2), alignDown(tasks[t - 1].origin.y(), d2),
-                      alignDown(tasks[t - 1].origin.z(), d2));
-            level2Of[t] = t == 0 ? 0 : level2Of[t - 1] + (sameParent ? 0 : 1);
+            if (t > 0) {
+                level2Of[t] = level2Of[t - 1] +
+                              (parent(tasks[t].origin) == parent(tasks[t - 1].origin) ? 0 : 1);
+            }
         }
     }
 
