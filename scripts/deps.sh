@@ -10,6 +10,7 @@ packages=(
   libgtest-dev libbenchmark-dev
   libopenvdb-tools python3-openvdb python3-numpy python3-matplotlib libpng-dev libopenexr-dev
   libnanovdb-dev libnanovdb-tools libassimp-dev
+  openmpi-bin libopenmpi-dev
   blender
   clang libclang-rt-14-dev llvm
 )

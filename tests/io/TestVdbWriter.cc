@@ -2,6 +2,7 @@
 // The parallel .vdb writer against OpenVDB's own: for the same grids and compression, the file
 // io::File::write makes, byte for byte but for the random UUID; read back by OpenVDB.
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/io/VdbPieces.h>
 
 #include "Grids.h"
 
@@ -9,6 +10,8 @@
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tools/SignedFloodFill.h>
 
 #include <gtest/gtest.h>
 
@@ -161,3 +164,91 @@ TEST_F(TestVdbWriter, CancelledTaskGroupWritesAndReadsNothing)
 }
 
 } // namespace
+
+namespace {
+
+/// @a grid but for its leaves, as raster::RasterRuns::skeleton gives it: an active tile of
+/// value 0 in a 128^3 node wherever @a grid has a leaf.
+openvdb::FloatGrid::Ptr skeletonOf(const openvdb::FloatGrid& grid)
+{
+    auto skeleton = grid.deepCopy();
+    std::vector<openvdb::Coord> leaves;
+    for (auto it = grid.tree().cbeginLeaf(); it; ++it) leaves.push_back(it->origin());
+    for (const auto& o : leaves) skeleton->tree().addTile(1, o, 0.0f, true);
+    return skeleton;
+}
+
+/// @a grid's leaves in @a runs runs of file order, each a grid of its own.
+std::vector<openvdb::FloatGrid::Ptr> leafRuns(const openvdb::FloatGrid& grid, int runs)
+{
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    for (auto it = grid.tree().cbeginLeaf(); it; ++it) leaves.push_back(&*it);
+    std::vector<openvdb::FloatGrid::Ptr> out;
+    for (int r = 0; r < runs; ++r) {
+        auto part = openvdb::FloatGrid::create(grid.background());
+        part->setGridClass(grid.getGridClass());
+        for (std::size_t i = leaves.size() * r / runs; i < leaves.size() * (r + 1) / runs; ++i) {
+            part->tree().addLeaf(new openvdb::FloatTree::LeafNodeType(*leaves[i]));
+        }
+        out.push_back(part);
+    }
+    return out;
+}
+
+} // namespace
+
+TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
+{
+    // The pieces ivdb-mpi writes (a head from the skeleton and the runs' entries, then each run's
+    // buffers) are the file writeVdb writes, for level sets with inside tiles, leaf runs that
+    // split 128^3 nodes, every compression and half floats.
+    auto big = sphere(1.0f, 0.005f, "surface");
+    openvdb::tools::signedFloodFill(big->tree());
+    openvdb::tools::pruneLevelSet(big->tree());
+    auto small = sphere(0.3f, 0.02f, "small");
+    small->insertMeta("note", openvdb::StringMetadata("kept"));
+    openvdb::MetaMap meta;
+    meta.insertMeta("creator", openvdb::StringMetadata("test"));
+    for (const auto& grid : {big, small}) {
+        ASSERT_GT(grid->tree().activeTileCount() + grid->tree().leafCount(), 0u);
+        const auto skeleton = skeletonOf(*grid);
+        for (auto c : {ivdb::io::Compression::Blosc, ivdb::io::Compression::Zip, ivdb::io::Compression::None}) {
+            for (bool half : {false, true}) {
+                ivdb::io::WriteOptions options;
+                options.compression = c;
+                options.half = half;
+                ivdb::io::writeVdb(path("whole.vdb"), {grid}, meta, options);
+                for (int runs : {1, 3, 7}) {
+                    const std::string what = grid->getName() + ", " +
+                        ivdb::io::compressionNames()[std::size_t(c)] + (half ? ", half" : "") +
+                        ", " + std::to_string(runs) + " runs";
+                    ivdb::io::LeafRun all;
+                    std::string body;
+                    for (const auto& part : leafRuns(*grid, runs)) {
+                        const ivdb::io::LeafRun run = ivdb::io::encodeLeafRun(*part, options);
+                        const std::size_t before = body.size();
+                        all.appendEntries(run);
+                        for (const auto& piece : run.pieces) body += piece;
+                        EXPECT_EQ(run.byteCount(), body.size() - before) << what;
+                    }
+                    ASSERT_EQ(all.masks.size(), grid->tree().leafCount()) << what;
+                    EXPECT_EQ(all.activeVoxels, grid->activeVoxelCount()) << what;
+                    const std::string head =
+                        ivdb::io::vdbFileHead(*skeleton, all, body.size(), meta, options);
+                    std::string a = bytes(path("whole.vdb")), b = head + body;
+                    ASSERT_EQ(a.size(), b.size()) << what;
+                    a.replace(21, 36, 36, '-');
+                    b.replace(21, 36, 36, '-');
+                    std::size_t first = 0;
+                    while (first < a.size() && a[first] == b[first]) ++first;
+                    EXPECT_EQ(first, a.size()) << what << ": first difference at byte " << first
+                                               << " of " << a.size() << " (head " << head.size() << ")";
+                }
+            }
+        }
+    }
+    // A skeleton and entries that disagree are refused.
+    auto skeleton = skeletonOf(*small);
+    ivdb::io::LeafRun none;
+    EXPECT_THROW(ivdb::io::vdbFileHead(*skeleton, none, 0, meta, {}), openvdb::ValueError);
+}

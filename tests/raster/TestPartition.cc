@@ -11,6 +11,8 @@
 #include <gtest/gtest.h>
 
 #include <set>
+#include <sstream>
+#include <string>
 #include <tuple>
 #include <vector>
 
@@ -153,6 +155,90 @@ TEST(TestPartition, MoreRanksThanLeavesAndBadCounts)
         } catch (const ParamError& e) {
             EXPECT_EQ(e.param(), "ranks");
             EXPECT_NE(std::string(e.what()).find(std::to_string(bad)), std::string::npos) << e.what();
+        }
+    }
+}
+
+namespace {
+
+/// A grid's nodes, tiles and voxels as a .vdb file stores them (topology, then buffers).
+std::string treeBytes(const openvdb::FloatGrid& g)
+{
+    std::ostringstream os(std::ios::binary);
+    g.tree().writeTopology(os, false);
+    g.tree().writeBuffers(os, false);
+    return os.str();
+}
+
+} // namespace
+
+// Runs built apart (as ivdb-mpi's ranks build them) and the skeleton from their leaves' fates
+// make rasterize()'s grid node for node and bit for bit, however the leaves are split.
+TEST(TestPartition, RunsAndSkeletonMakeTheRasterizedGrid)
+{
+    std::vector<Case> all = cases();
+    auto a = std::make_shared<implicit::Sphere>(Vec3d(-0.35, 0.02, 0.0), 0.6);
+    auto b = std::make_shared<implicit::Sphere>(Vec3d(0.35, 0.0, -0.03), 0.6);
+    // Inside tiles of every size: a sphere 400 voxels across holds whole 128^3 nodes.
+    all.push_back({"large sphere", std::make_shared<implicit::Sphere>(Vec3d(0.0), 2.0), 0.01});
+    all.push_back({"difference", std::make_shared<implicit::Csg>(implicit::Csg::Op::Difference,
+                   std::vector<implicit::Implicit::Ptr>{a, b}), 0.01});
+    for (const Case& c : all) {
+        for (auto mode : {raster::Distance::Exact, raster::Distance::Bound}) {
+            raster::RasterSettings s;
+            s.voxelSize = c.dx;
+            s.distance = mode;
+            const bool bound = mode == raster::Distance::Bound;
+            raster::RasterStats whole;
+            s.stats = &whole;
+            openvdb::FloatGrid::Ptr expected;
+            try {
+                expected = raster::rasterize(c.shape, s);
+            } catch (const openvdb::ValueError&) {
+                ASSERT_TRUE(bound) << c.name; // a quadric has no "bound" mode
+                continue;
+            }
+            s.stats = nullptr;
+            const std::string want = treeBytes(*expected);
+            raster::RasterRuns runs(c.shape, s);
+            for (std::uint64_t k : {1, 2, 5, 13}) {
+                const std::string what = std::string(c.name) + (bound ? ", bound" : "") + ", " +
+                                         std::to_string(k) + " runs";
+                const std::uint64_t n = runs.leaves();
+                std::vector<raster::LeafFate> fates;
+                std::vector<openvdb::FloatTree::Ptr> parts;
+                raster::RasterStats sum;
+                bool anyInside = false;
+                for (std::uint64_t r = 0; r < k; ++r) {
+                    const std::uint64_t first = n * r / k, last = n * (r + 1) / k;
+                    raster::RunResult run = runs.build(first, last - first);
+                    ASSERT_EQ(run.fates.size(), last - first) << what;
+                    fates.insert(fates.end(), run.fates.begin(), run.fates.end());
+                    parts.push_back(run.leaves);
+                    sum.localDistances += run.stats.localDistances;
+                    sum.searchedDistances += run.stats.searchedDistances;
+                    sum.approximateDistances += run.stats.approximateDistances;
+                    anyInside = anyInside || run.anyInside;
+                }
+                EXPECT_EQ(sum.localDistances, whole.localDistances) << what;
+                EXPECT_EQ(sum.searchedDistances, whole.searchedDistances) << what;
+                EXPECT_EQ(sum.approximateDistances, whole.approximateDistances) << what;
+                const openvdb::FloatGrid::Ptr skeleton = runs.skeleton(fates, anyInside);
+                EXPECT_EQ(skeleton->tree().activeTileCount(), expected->tree().leafCount()) << what;
+                EXPECT_EQ(skeleton->getName(), expected->getName());
+                EXPECT_EQ(skeleton->getGridClass(), openvdb::GRID_LEVEL_SET);
+                EXPECT_EQ(skeleton->transform(), expected->transform()) << what;
+                // The leaves in place of the skeleton's active tiles: the rasterized grid.
+                for (const auto& part : parts) {
+                    for (auto it = part->cbeginLeaf(); it; ++it) {
+                        skeleton->tree().addLeaf(new openvdb::FloatTree::LeafNodeType(*it));
+                    }
+                }
+                EXPECT_EQ(skeleton->tree().activeTileCount(), 0u) << what;
+                EXPECT_TRUE(treeBytes(*skeleton) == want) << what;
+            }
+            EXPECT_THROW(runs.build(runs.leaves(), 1), openvdb::ValueError);
+            EXPECT_THROW(runs.skeleton({}, true), openvdb::ValueError);
         }
     }
 }

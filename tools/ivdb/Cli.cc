@@ -203,14 +203,15 @@ std::pair<double, double> parseRange(const std::string& text)
     return {lo, hi};
 }
 
-int run(int argc, char** argv)
+int run(int argc, char** argv, const Program& program)
 {
+    const std::string error = program.name + ": error: ";
     try {
-        installSignalHandlers();
+        if (program.handlesSignals) installSignalHandlers();
         openvdb::initialize();
-        CLI::App app{"ivdb: implicit surfaces to sparse OpenVDB level sets", "ivdb"};
+        CLI::App app{program.description, program.name};
         app.require_subcommand(1);
-        app.set_version_flag("--version", std::string("ivdb ") + ivdb::kVersion);
+        app.set_version_flag("--version", program.name + " " + ivdb::kVersion);
         std::optional<int> threads;
         app.add_option("--threads", threads, "Worker threads (default: all cores)")
             ->check(CLI::Validator(
@@ -222,19 +223,7 @@ int run(int argc, char** argv)
                 },
                 "POSITIVE"));
         Action action;
-        addRasterize(app, action);
-        addInfo(app, action);
-        addGradient(app, action);
-        addCurvature(app, action);
-        addCompareGradient(app, action);
-        addCsg(app, action);
-        addBlend(app, action);
-        addMesh(app, action);
-        addGlyphs(app, action);
-        addRender(app, action);
-        addConvert(app, action);
-        addPlan(app, action);
-        addBench(app, action);
+        program.addCommands(app, action);
         // CLI11 reports an unknown command only as "a subcommand is required": name it.
         for (int i = 1; i < argc; ++i) {
             const std::string a = argv[i];
@@ -242,8 +231,11 @@ int run(int argc, char** argv)
             if (a.rfind("-", 0) == 0) continue;
             const auto subs = app.get_subcommands([&a](const CLI::App* c) { return c->get_name() == a; });
             if (subs.empty()) {
-                std::cerr << "ivdb: error: unknown command '" << a
-                          << "'; commands: rasterize, info, gradient, curvature, compare-gradient, csg, blend, mesh, glyphs, render, convert, bench (run 'ivdb --help')" << std::endl;
+                if (program.printsErrors()) {
+                    std::cerr << error << "unknown command '" << a << "'; commands: "
+                              << program.commandList << " (run '" << program.name << " --help')"
+                              << std::endl;
+                }
                 return 2;
             }
             break;
@@ -251,14 +243,16 @@ int run(int argc, char** argv)
         try {
             app.parse(argc, argv);
         } catch (const CLI::CallForHelp& e) {
-            return app.exit(e);
+            return program.printsErrors() ? app.exit(e) : 0;
         } catch (const CLI::CallForAllHelp& e) {
-            return app.exit(e);
+            return program.printsErrors() ? app.exit(e) : 0;
         } catch (const CLI::CallForVersion& e) {
-            return app.exit(e);
+            return program.printsErrors() ? app.exit(e) : 0;
         } catch (const CLI::ParseError& e) {
-            std::cerr << "ivdb: error: " << e.what() << "\nRun 'ivdb --help' or 'ivdb COMMAND --help'."
-                      << std::endl;
+            if (program.printsErrors()) {
+                std::cerr << error << e.what() << "\nRun '" << program.name << " --help' or '"
+                          << program.name << " COMMAND --help'." << std::endl;
+            }
             return 2;
         }
         std::optional<tbb::global_control> limit;
@@ -269,10 +263,10 @@ int run(int argc, char** argv)
             std::cerr << gInterruptedMessage.load() << std::flush;
             return 128 + gSignal;
         }
-        std::cerr << "ivdb: error: " << errorMessage(e) << std::endl;
+        if (program.printsErrors()) std::cerr << error << errorMessage(e) << std::endl;
         return 1;
     } catch (...) {
-        std::cerr << "ivdb: error: unknown failure" << std::endl;
+        if (program.printsErrors()) std::cerr << error << "unknown failure" << std::endl;
         return 1;
     }
 }

@@ -19,13 +19,31 @@
 
 namespace ivdb::cli {
 
-/// @brief Run the `ivdb` command line; returns the process exit code (0 on success).
-/// @details Every error is caught: it prints `ivdb: error: <what>` to stderr and returns 1
-/// (2 for a usage error). Nothing here exits or aborts, so tests can call it.
-int run(int argc, char** argv);
-
 /// @brief The work a subcommand does once its options are parsed; returns the exit code.
 using Action = std::function<int()>;
+
+/// @brief A command-line program built on this file's pieces: `ivdb`, `ivdb-mpi`.
+struct Program
+{
+    std::string name;         ///< as errors name it: "<name>: error: ..."
+    std::string description;
+    /// Declares the subcommands (each sets the action when it is the one given).
+    std::function<void(CLI::App&, Action&)> addCommands;
+    std::string commandList;  ///< the subcommands, for the unknown-command message
+    /// Print errors (false: another process of the same run prints them).
+    std::function<bool()> printsErrors = [] { return true; };
+    /// Handle SIGINT, SIGTERM and SIGHUP (see run()); false: the default actions (a process
+    /// whose launcher stops it and reports for it).
+    bool handlesSignals = true;
+};
+
+/// @brief Run @a program's command line; returns the process exit code (0 on success).
+/// @details Every error is caught: it prints `NAME: error: <what>` to stderr and returns 1
+/// (2 for a usage error). Nothing here exits or aborts, so tests can call it.
+int run(int argc, char** argv, const Program& program);
+
+/// @brief The `ivdb` command line (tools/ivdb/main.cc).
+int run(int argc, char** argv);
 
 /// @brief A subcommand being declared. Options that set a library parameter are declared with
 /// it, so that a ParamError from the library names the option the user typed.

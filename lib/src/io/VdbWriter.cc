@@ -9,6 +9,7 @@
 // else of a grid's record (descriptor, metadata, transform, topology) is written by OpenVDB's own
 // functions, in the order Archive::writeGrid writes it (Archive.cc:1360-1443 in 10.0.1).
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/io/VdbPieces.h>
 
 #include "Cancel.h"
 
@@ -30,6 +31,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <memory>
 #include <map>
 #include <set>
 #include <sstream>
@@ -253,6 +256,30 @@ public:
                 }
             }
         }
+    }
+
+    /// Every leaf encoded, held at once (a run of a grid's leaves: encodeLeafRun).
+    LeafRun encode() const
+    {
+        LeafRun out;
+        const std::size_t n = mLeaves.leafCount();
+        std::vector<LeafChunk> chunks = compress(0, n);
+        out.pieces.reserve(chunks.size());
+        out.codes.reserve(n);
+        if (hasSizes()) out.sizes.reserve(n);
+        for (auto& c : chunks) {
+            out.pieces.push_back(std::move(c.bytes));
+            out.codes.insert(out.codes.end(), c.masks.begin(), c.masks.end());
+            out.sizes.insert(out.sizes.end(), c.sizes.begin(), c.sizes.end());
+        }
+        out.masks.reserve(n);
+        for (std::size_t i = 0; i < n; ++i) {
+            const LeafT& leaf = mLeaves.leaf(i);
+            out.masks.push_back(leaf.valueMask());
+            out.activeVoxels += leaf.onVoxelCount();
+            leaf.evalActiveBoundingBox(out.activeBox, true);
+        }
+        return out;
     }
 
 private:
@@ -651,6 +678,202 @@ void writeVdbStream(std::ostream& os, const openvdb::GridCPtrVec& input,
         }
         openvdb::io::setDataCompression(os, flags);
     }
+}
+
+std::uint64_t LeafRun::byteCount() const
+{
+    std::uint64_t n = 0;
+    for (const auto& p : pieces) n += p.size();
+    return n;
+}
+
+void LeafRun::appendEntries(const LeafRun& next)
+{
+    codes.insert(codes.end(), next.codes.begin(), next.codes.end());
+    sizes.insert(sizes.end(), next.sizes.begin(), next.sizes.end());
+    masks.insert(masks.end(), next.masks.begin(), next.masks.end());
+    activeVoxels += next.activeVoxels;
+    activeBox.expand(next.activeBox);
+}
+
+LeafRun encodeLeafRun(const openvdb::FloatGrid& run, const WriteOptions& options)
+{
+    openvdb::FloatGrid::ConstPtr grid = run.copy();
+    if (options.half) {
+        auto copy = openvdb::ConstPtrCast<openvdb::FloatGrid>(grid);
+        copy->setSaveFloatAsHalf(true);
+    }
+    return GridWriter<openvdb::FloatGrid>(*grid, compressionFlags(options.compression),
+                                          std::numeric_limits<std::uint64_t>::max()).encode();
+}
+
+namespace {
+
+using Int2T = openvdb::FloatTree::RootNodeType::ChildNodeType;
+using Int1T = Int2T::ChildNodeType;
+
+/// An internal node's topology as InternalNode::writeTopology writes it, for a node whose
+/// children are @a childMask and tiles the others (value mask @a valueMask): the masks, then the
+/// values (zero where a child is) compressed as OpenVDB compresses them.
+template<typename NodeT, typename ValueOf>
+void writeNodeTable(std::ostream& os, const typename NodeT::NodeMaskType& childMask,
+                    const typename NodeT::NodeMaskType& valueMask, ValueOf&& valueOf, bool toHalf)
+{
+    childMask.save(os);
+    valueMask.save(os);
+    std::unique_ptr<float[]> values(new float[NodeT::NUM_VALUES]);
+    for (openvdb::Index i = 0; i < NodeT::NUM_VALUES; ++i) {
+        values[i] = childMask.isOn(i) ? 0.0f : valueOf(i);
+    }
+    openvdb::io::writeCompressedValues(os, values.get(), NodeT::NUM_VALUES, valueMask, childMask,
+                                       toHalf);
+}
+
+/// Tree::writeTopology of the grid @a skeleton stands for: its 128^3 nodes' active tiles are
+/// leaves, whose value masks are @a masks in file order.
+void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
+                           const std::vector<LeafRun::Mask>& masks, bool toHalf)
+{
+    const std::int32_t bufferCount = 1;
+    os.write(reinterpret_cast<const char*>(&bufferCount), sizeof(bufferCount));
+    const auto& root = skeleton.root();
+    const float& bg = root.background();
+    const float bgOut = toHalf ? openvdb::io::truncateRealToHalf(bg) : bg;
+    os.write(reinterpret_cast<const char*>(&bgOut), sizeof(float));
+    openvdb::io::setGridBackgroundValuePtr(os, &bg);
+    openvdb::Index tiles = 0;
+    for (auto it = root.cbeginValueAll(); it; ++it) ++tiles;
+    const openvdb::Index children = root.childCount();
+    os.write(reinterpret_cast<const char*>(&tiles), sizeof(tiles));
+    os.write(reinterpret_cast<const char*>(&children), sizeof(children));
+    std::size_t next = 0;
+    if (tiles + children > 0) {
+        for (auto it = root.cbeginValueAll(); it; ++it) {
+            const openvdb::Coord o = it.getCoord();
+            const float v = *it;
+            const bool active = it.isValueOn();
+            os.write(reinterpret_cast<const char*>(o.asPointer()), 3 * sizeof(std::int32_t));
+            os.write(reinterpret_cast<const char*>(&v), sizeof(v));
+            os.write(reinterpret_cast<const char*>(&active), sizeof(active));
+        }
+        for (auto it2 = root.cbeginChildOn(); it2; ++it2) {
+            const openvdb::Coord o = it2.getCoord();
+            os.write(reinterpret_cast<const char*>(o.asPointer()), 3 * sizeof(std::int32_t));
+            const Int2T& n2 = *it2;
+            if (!n2.getValueMask().isOff()) {
+                OPENVDB_THROW(openvdb::ValueError, "a level set's skeleton has an active tile "
+                              "above its 128^3 nodes");
+            }
+            writeNodeTable<Int2T>(os, n2.getChildMask(), n2.getValueMask(),
+                [&](openvdb::Index i) { return n2.getValue(n2.offsetToGlobalCoord(i)); }, toHalf);
+            for (auto it1 = n2.cbeginChildOn(); it1; ++it1) {
+                const Int1T& n1 = *it1;
+                // The active tiles are the leaves: they become the child mask.
+                const Int1T::NodeMaskType leaves = n1.getValueMask();
+                if (next + leaves.countOn() > masks.size()) {
+                    OPENVDB_THROW(openvdb::ValueError, "the skeleton has more leaves than the " +
+                                  std::to_string(masks.size()) + " the runs hold");
+                }
+                writeNodeTable<Int1T>(os, leaves, Int1T::NodeMaskType(),
+                    [&](openvdb::Index i) { return n1.getValue(n1.offsetToGlobalCoord(i)); }, toHalf);
+                for (auto on = leaves.beginOn(); on; ++on) masks[next++].save(os);
+            }
+        }
+    }
+    if (next != masks.size()) {
+        OPENVDB_THROW(openvdb::ValueError, "the skeleton has " + std::to_string(next) +
+                      " leaves, the runs " + std::to_string(masks.size()));
+    }
+}
+
+} // namespace
+
+std::string vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& leaves,
+                        std::uint64_t bufferBytes, const openvdb::MetaMap& fileMetadata,
+                        const WriteOptions& options)
+{
+    auto grid = openvdb::ConstPtrCast<openvdb::FloatGrid>(skeletonIn.copy());
+    if (options.half) grid->setSaveFloatAsHalf(true);
+    const bool half = grid->saveFloatAsHalf();
+    const std::uint32_t flags = compressionFlags(options.compression);
+    std::uint32_t gridFlags = flags;
+    if (grid->getGridClass() == openvdb::GRID_LEVEL_SET ||
+        grid->getGridClass() == openvdb::GRID_FOG_VOLUME) {
+        gridFlags &= ~openvdb::io::COMPRESS_ZIP;
+    }
+    std::string out;
+    StringSink sink(out);
+    std::ostream os(&sink);
+    // writeVdbStream's steps for a file of one grid.
+    ArchiveParts archive(flags);
+    openvdb::io::setDataCompression(os, flags);
+    openvdb::io::setWriteGridStatsMetadata(os, true);
+    archive.header(os);
+    fileMetadata.writeMeta(os);
+    const std::int32_t count = 1;
+    os.write(reinterpret_cast<const char*>(&count), sizeof(count));
+    const std::string name = uniqueNames({grid})[0];
+    openvdb::io::GridDescriptor gd(name, grid->type(), half);
+    gd.writeHeader(os);
+    const std::size_t offsets = out.size();
+    gd.writeStreamPos(os);
+    gd.setGridPos(std::int64_t(out.size()));
+
+    // GridWriter::write's record, with the statistics and table from the runs' entries.
+    std::string head;
+    {
+        StringSink hsink(head);
+        std::ostream hs(&hsink);
+        hs.copyfmt(os);
+        openvdb::io::setDataCompression(hs, gridFlags);
+        grid->writeTransform(hs);
+        writeSkeletonTopology(hs, grid->tree(), leaves.masks, half);
+    }
+    auto meta = openvdb::ConstPtrCast<openvdb::GridBase>(grid->copyGrid());
+    const auto leafBytes = openvdb::FloatTree::LeafNodeType(openvdb::Coord(), 0.0f).memUsage();
+    meta->insertMeta(openvdb::GridBase::META_FILE_BBOX_MIN,
+                     openvdb::Vec3IMetadata(leaves.activeBox.min().asVec3i()));
+    meta->insertMeta(openvdb::GridBase::META_FILE_BBOX_MAX,
+                     openvdb::Vec3IMetadata(leaves.activeBox.max().asVec3i()));
+    meta->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::Int64Metadata(std::int64_t(
+        grid->tree().memUsage() + leaves.masks.size() * leafBytes)));
+    meta->insertMeta(openvdb::GridBase::META_FILE_VOXEL_COUNT,
+                     openvdb::Int64Metadata(std::int64_t(leaves.activeVoxels)));
+    meta->insertMeta("file_compression",
+                     openvdb::StringMetadata(openvdb::io::compressionToString(gridFlags)));
+    openvdb::io::DelayedLoadMetadata table;
+    const std::size_t n = leaves.masks.size();
+    const bool sized = (flags & (openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ZIP)) != 0;
+    if (leaves.codes.size() != n || (sized && leaves.sizes.size() != n)) {
+        OPENVDB_THROW(openvdb::ValueError, "the runs' entries disagree: " + std::to_string(n) +
+                      " masks, " + std::to_string(leaves.codes.size()) + " codes, " +
+                      std::to_string(leaves.sizes.size()) + " sizes");
+    }
+    if (n > 0) {
+        table.resizeMask(n);
+        if (sized) table.resizeCompressedSize(n);
+        for (std::size_t i = 0; i < n; ++i) {
+            table.setMask(i, leaves.codes[i]);
+            if (sized) table.setCompressedSize(i, leaves.sizes[i]);
+        }
+    }
+    openvdb::io::setDataCompression(os, gridFlags);
+    os.write(reinterpret_cast<const char*>(&gridFlags), sizeof(gridFlags));
+    meta->insertMeta("file_delayed_load", table);
+    meta->writeMeta(os);
+    os.write(head.data(), std::streamsize(head.size()));
+    const std::int64_t blockPos = std::int64_t(out.size());
+    gd.setBlockPos(blockPos);
+    gd.setEndPos(blockPos + std::int64_t(bufferBytes));
+    // The descriptor's offsets, patched in as writeTypedGrid seeks back to write them.
+    std::string pos;
+    {
+        StringSink psink(pos);
+        std::ostream ps(&psink);
+        gd.writeStreamPos(ps);
+    }
+    out.replace(offsets, pos.size(), pos);
+    return out;
 }
 
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,

@@ -74,6 +74,16 @@ std::string sceneAsRasterized(const scene::Scene& sc, const raster::RasterSettin
 
 } // namespace
 
+void stampRaster(openvdb::GridBase& grid, const RasterizeOptions& opt, const scene::Scene& sc,
+                 const raster::RasterSettings& settings, std::optional<int> frame)
+{
+    io::stampGrid(grid, opt.scene);
+    grid.insertMeta("ivdb_scene", openvdb::StringMetadata(sceneAsRasterized(sc, settings)));
+    grid.insertMeta("ivdb_sampling", openvdb::StringMetadata(
+        settings.sampling == raster::Sampling::Dense ? "dense" : "sparse"));
+    if (frame) grid.insertMeta("ivdb_frame", openvdb::Int32Metadata(*frame));
+}
+
 namespace {
 
 /// The scene of @a opt at @a frame (unset: not a frame of a sequence).
@@ -123,11 +133,7 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
     }
     settings.stats = nullptr;
     result.gridBytes = result.surface->memUsage();
-    io::stampGrid(*result.surface, opt.scene);
-    result.surface->insertMeta("ivdb_scene", openvdb::StringMetadata(sceneAsRasterized(sc, settings)));
-    result.surface->insertMeta("ivdb_sampling", openvdb::StringMetadata(
-        settings.sampling == raster::Sampling::Dense ? "dense" : "sparse"));
-    if (frame) result.surface->insertMeta("ivdb_frame", openvdb::Int32Metadata(*frame));
+    stampRaster(*result.surface, opt, sc, settings, frame);
     if (opt.fog) result.density = detail::fogWithStamps(*result.surface);
     result.fileBytes = detail::writeGrids(opt.output, {result.surface, result.density}, opt.write);
     result.totalSeconds = clock.total();

@@ -336,9 +336,13 @@ void checkSparseMemory(const Context& ctx, const std::vector<Task>& level2)
 }
 
 /// The leaves (or inside tiles) of one 32^3 block into @a int1: @a node is the shape pruned to
-/// the block, null when the whole block is inside. Returns true if it added anything.
+/// the block, null when the whole block is inside. @a straddling(o, box, node, int1, inside)
+/// settles a leaf the band may cross: it adds what the leaf becomes to @a int1 and returns true,
+/// or returns false, with @a inside set when the leaf is an inside tile. Returns true if it
+/// added anything.
+template<typename Fn>
 bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Implicit* node,
-               Counts& counts)
+               Fn&& straddling)
 {
     bool any = false;
     const int d0 = LeafT::DIM;
@@ -348,13 +352,9 @@ bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Imp
             const CoordBBox box0 = CoordBBox::createCube(o, d0);
             const Verdict v0 = ctx.classify(*node, box0);
             inside = v0 == Verdict::Inside;
-            if (v0 == Verdict::Straddle) {
-                const Implicit::Ptr node0 = node->prune(ctx.dilatedWorldBox(box0));
-                if (LeafT* leaf = buildLeaf(ctx, *node0, o, inside, &counts)) {
-                    int1.addLeaf(leaf);
-                    any = true;
-                    return;
-                }
+            if (v0 == Verdict::Straddle && straddling(o, box0, *node, int1, inside)) {
+                any = true;
+                return;
             }
         }
         if (inside) {
@@ -364,6 +364,27 @@ bool fillBlock(const Context& ctx, Int1T& int1, const CoordBBox& part, const Imp
     });
     return any;
 }
+
+/// fillBlock's leaves built from the shape, as the rasterizer builds them.
+struct BuildLeaves
+{
+    const Context& ctx;
+    Counts& counts;
+
+    LeafT* build(const Coord& o, const CoordBBox& box0, const Implicit& node, bool& inside) const
+    {
+        const Implicit::Ptr node0 = node.prune(ctx.dilatedWorldBox(box0));
+        return buildLeaf(ctx, *node0, o, inside, &counts);
+    }
+
+    bool operator()(const Coord& o, const CoordBBox& box0, const Implicit& node, Int1T& int1,
+                    bool& inside) const
+    {
+        LeafT* leaf = build(o, box0, node, inside);
+        if (leaf) int1.addLeaf(leaf);
+        return leaf != nullptr;
+    }
+};
 
 /// The descent below one 128^3 node (the rasterizer's and the partition's): the node's verdict,
 /// and if it straddles, @a onBlock(part, node) for each of its 32^3 blocks that is not outside,
@@ -395,8 +416,10 @@ Verdict descendLevel1(const Context& ctx, const Task& task, Fn&& onBlock)
     return v1;
 }
 
-/// One 128^3 node of the sparse path: its 32^3 blocks, then their leaves.
-Level1Result buildLevel1(const Context& ctx, const Task& task, Counts& counts)
+/// One 128^3 node of the sparse path: its 32^3 blocks, then their leaves, each leaf the band
+/// may cross settled by @a straddling (fillBlock).
+template<typename Fn>
+Level1Result buildLevel1(const Context& ctx, const Task& task, Fn&& straddling)
 {
     Level1Result res;
     res.origin = task.origin;
@@ -404,7 +427,7 @@ Level1Result buildLevel1(const Context& ctx, const Task& task, Counts& counts)
     bool any = false;
     const Verdict v1 = descendLevel1(ctx, task, [&](const CoordBBox& part, const Implicit* node) {
         if (!int1) int1 = std::make_unique<Int1T>(task.origin, static_cast<float>(ctx.band));
-        any = fillBlock(ctx, *int1, part, node, counts) || any;
+        any = fillBlock(ctx, *int1, part, node, straddling) || any;
     });
     res.inside = v1 == Verdict::Inside;
     if (any) res.node = int1.release();
@@ -485,7 +508,7 @@ openvdb::FloatGrid::Ptr sampleSparse(const Context& ctx, Counts& counts)
         [&](const tbb::blocked_range<size_t>& r) {
         for (size_t t = r.begin(); t != r.end(); ++t) {
             if (cancelled) return;
-            results[t] = buildLevel1(ctx, tasks[t], counts);
+            results[t] = buildLevel1(ctx, tasks[t], BuildLeaves{ctx, counts});
             const size_t n = ++done;
             if (util::wasInterrupted(ctx.interrupter, int(100 * n / tasks.size()))) cancelled = true;
         }
@@ -868,15 +891,22 @@ std::uint64_t denseMemoryEstimate(const Implicit::Ptr& shape, const RasterSettin
     return bytes >= 1.8e19 ? std::numeric_limits<std::uint64_t>::max() : std::uint64_t(bytes);
 }
 
+bool isOwnRaster(const Implicit::Ptr& shape, const RasterSettings& settings)
+{
+    const auto* g = dynamic_cast<const implicit::GridShape*>(shape.get());
+    return g && settings.sampling == Sampling::Sparse && !settings.bounds &&
+           g->grid().voxelSize()[0] == settings.voxelSize &&
+           std::abs(g->bandWidth() - settings.halfWidth * settings.voxelSize) <=
+               1e-6 * settings.voxelSize;
+}
+
 openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettings& settings)
 {
     const Context ctx = makeContext(shape, settings);
 
     // A mesh or .vdb level set already on this lattice with this band is its own raster.
-    if (const auto* g = dynamic_cast<const implicit::GridShape*>(shape.get());
-        g && settings.sampling == Sampling::Sparse && !settings.bounds &&
-        g->grid().voxelSize()[0] == settings.voxelSize &&
-        std::abs(g->bandWidth() - ctx.band) <= 1e-6 * ctx.dx) {
+    if (isOwnRaster(shape, settings)) {
+        const auto* g = static_cast<const implicit::GridShape*>(shape.get());
         openvdb::FloatGrid::Ptr grid = g->grid().deepCopy();
         grid->setGridClass(openvdb::GRID_LEVEL_SET);
         grid->setName("surface");
@@ -967,10 +997,11 @@ struct LeafIndex
     std::vector<std::uint64_t> nodesBefore;  // tasks with leaves before each task
     std::vector<std::uint64_t> level2Of;     // each task's 4096^3 node, counted in file order
 
+    std::vector<Coord> insideLevel2;         // 4096^3 nodes wholly inside (root tiles)
+
     explicit LeafIndex(const Context& ctx)
     {
-        std::vector<Coord> inside;
-        tasks = level1Tasks(ctx, inside, false);
+        tasks = level1Tasks(ctx, insideLevel2, false);
         leaves.resize(tasks.size());
         tbb::parallel_for(tbb::blocked_range<size_t>(0, tasks.size(), 1),
                           [&](const tbb::blocked_range<size_t>& r) {
@@ -1005,6 +1036,18 @@ struct LeafIndex
     {
         const size_t t = taskOf(i);
         return leaves[t][i - start[t]];
+    }
+
+    /// The index of the leaf at @a o of task @a t, which the descent found straddling.
+    std::uint64_t indexOf(size_t t, const Coord& o) const
+    {
+        const auto& l = leaves[t];
+        const auto it = std::lower_bound(l.begin(), l.end(), o);
+        if (it == l.end() || *it != o) {
+            OPENVDB_THROW(openvdb::RuntimeError, "internal error: a leaf the descent found "
+                          "straddling is not in the partition's index");
+        }
+        return start[t] + std::uint64_t(it - l.begin());
     }
 };
 
@@ -1083,6 +1126,122 @@ Partition partition(const Implicit::Ptr& shape, const RasterSettings& settings, 
     }
     out.balance = n ? double(most) / (double(n) / double(ranks)) : 1.0;
     return out;
+}
+
+struct RasterRuns::Impl
+{
+    Context ctx;
+    LeafIndex index;
+
+    explicit Impl(const Context& c): ctx(c), index(ctx) {}
+};
+
+RasterRuns::RasterRuns(const Implicit::Ptr& shape, const RasterSettings& settings)
+{
+    if (settings.sampling != Sampling::Sparse) {
+        OPENVDB_THROW(openvdb::ValueError, "a rasterization in runs of leaves samples sparsely");
+    }
+    if (isOwnRaster(shape, settings)) {
+        OPENVDB_THROW(openvdb::ValueError, "the shape is a level set on the output's lattice, "
+                      "its own raster: there is nothing to split (rasterize copies it)");
+    }
+    mImpl = std::make_unique<Impl>(makeContext(shape, settings));
+}
+
+RasterRuns::~RasterRuns() = default;
+
+std::uint64_t RasterRuns::leaves() const { return mImpl->index.count(); }
+
+RunResult RasterRuns::build(std::uint64_t first, std::uint64_t count) const
+{
+    const Context& ctx = mImpl->ctx;
+    const LeafIndex& index = mImpl->index;
+    if (first > index.count() || count > index.count() - first) {
+        OPENVDB_THROW(openvdb::ValueError, "leaves " + std::to_string(first) + " to " +
+                      std::to_string(first + count) + " are beyond the " +
+                      std::to_string(index.count()) + " leaves the band may cross");
+    }
+    const float bg = static_cast<float>(ctx.band);
+    RunResult out;
+    out.leaves = std::make_shared<FloatTree>(bg);
+    out.fates.assign(count, LeafFate::Outside);
+    if (count == 0) return out;
+    const std::uint64_t end = first + count;
+    const size_t ta = index.taskOf(first), tb = index.taskOf(end - 1);
+    std::vector<std::vector<LeafT*>> built(tb - ta + 1);
+    Counts counts;
+    std::atomic<size_t> done{0};
+    std::atomic<bool> cancelled{false};
+    util::InterruptScope scope(ctx.interrupter, "Rasterizing");
+    tbb::parallel_for(tbb::blocked_range<size_t>(ta, tb + 1, 1),
+                      [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t t = r.begin(); t != r.end(); ++t) {
+            if (cancelled) return;
+            // The descent of rasterize(), building only the run's leaves.
+            descendLevel1(ctx, index.tasks[t], [&](const CoordBBox& part, const Implicit* node) {
+                if (!node) return;
+                forEachCube(part, LeafT::DIM, [&](const Coord& o) {
+                    const CoordBBox box0 = CoordBBox::createCube(o, LeafT::DIM);
+                    if (ctx.classify(*node, box0) != Verdict::Straddle) return;
+                    const std::uint64_t i = index.indexOf(t, o);
+                    if (i < first || i >= end) return;
+                    bool inside = false;
+                    LeafT* leaf = BuildLeaves{ctx, counts}.build(o, box0, *node, inside);
+                    out.fates[i - first] = leaf ? LeafFate::Leaf
+                                                : inside ? LeafFate::Inside : LeafFate::Outside;
+                    if (leaf) built[t - ta].push_back(leaf);
+                });
+            });
+            const size_t n = ++done;
+            if (util::wasInterrupted(ctx.interrupter, int(100 * n / (tb - ta + 1)))) cancelled = true;
+        }
+    });
+    openvdb::tree::ValueAccessor<FloatTree> acc(*out.leaves);
+    for (auto& leaves : built) {
+        for (LeafT* leaf : leaves) acc.addLeaf(leaf);
+    }
+    if (cancelled) util::throwInterrupted();
+    scope.end();
+    out.stats.localDistances = counts.local;
+    out.stats.searchedDistances = counts.searched;
+    out.stats.approximateDistances = counts.approximate;
+    out.stats.sweptDistances = counts.unknown.size();
+    out.anyInside = counts.anyInside;
+    return out;
+}
+
+openvdb::FloatGrid::Ptr RasterRuns::skeleton(const std::vector<LeafFate>& fates, bool anyInside) const
+{
+    const Context& ctx = mImpl->ctx;
+    const LeafIndex& index = mImpl->index;
+    if (fates.size() != index.count()) {
+        OPENVDB_THROW(openvdb::ValueError, std::to_string(fates.size()) + " leaf fates for " +
+                      std::to_string(index.count()) + " leaves");
+    }
+    const float bg = static_cast<float>(ctx.band);
+    auto grid = openvdb::FloatGrid::create(bg);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
+    // sampleSparse's descent, each leaf settled by its fate: a leaf becomes an active tile.
+    std::vector<Level1Result> results(index.tasks.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, index.tasks.size(), 1),
+                      [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t t = r.begin(); t != r.end(); ++t) {
+            results[t] = buildLevel1(ctx, index.tasks[t],
+                [&](const Coord& o, const CoordBBox&, const Implicit&, Int1T& int1, bool& inside) {
+                    const LeafFate fate = fates[index.indexOf(t, o)];
+                    if (fate == LeafFate::Leaf) int1.addTile(int1.coordToOffset(o), 0.0f, true);
+                    inside = fate == LeafFate::Inside;
+                    return fate == LeafFate::Leaf;
+                });
+        }
+    });
+    assembleTree(grid->tree(), results, index.insideLevel2, bg);
+    if (!ctx.exact && !anyInside) grid->clear();
+    // As rasterize() prunes: a node without leaves (active tiles here) becomes a tile.
+    openvdb::tools::pruneLevelSet(grid->tree());
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    grid->setName("surface");
+    return grid;
 }
 
 } // namespace ivdb::raster

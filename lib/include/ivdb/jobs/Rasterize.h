@@ -63,6 +63,12 @@ struct RasterizeResult
 /// rasterized by rasterizeSequence().
 RasterizeResult rasterize(const RasterizeOptions& options);
 
+/// @brief The metadata rasterize() gives its level set: ivdb's stamp (io::stampGrid, the scene
+/// file as source), the scene as rasterized (`ivdb_scene`: the overrides applied), the sampling
+/// (`ivdb_sampling`) and, for a frame of a sequence, `ivdb_frame`.
+void stampRaster(openvdb::GridBase& grid, const RasterizeOptions& options, const scene::Scene& scene,
+                 const raster::RasterSettings& settings, std::optional<int> frame = std::nullopt);
+
 /// @brief One frame of a sequence, as rasterizeSequence() reports it.
 struct FrameReport
 {

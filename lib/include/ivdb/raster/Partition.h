@@ -7,6 +7,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace ivdb::raster {
@@ -51,5 +52,66 @@ struct Partition
 /// @throw openvdb::ValueError for an unbounded shape without bounds, or one far too large
 Partition partition(const implicit::Implicit::Ptr& shape, const RasterSettings& settings,
                     int ranks, int sampleLeaves = 4096);
+
+/// @brief What became of a leaf the band may cross, once built.
+enum class LeafFate : std::uint8_t
+{
+    Outside = 0, ///< no band voxel, outside: the background
+    Inside = 1,  ///< no band voxel, inside: an inside tile
+    Leaf = 2     ///< a leaf of the grid
+};
+
+/// @brief One run of leaves built by RasterRuns::build().
+struct RunResult
+{
+    /// The run's leaves that hold band voxels, exactly as rasterize() makes them, in a tree of
+    /// their own (background the band, no tiles).
+    openvdb::FloatTree::Ptr leaves;
+    /// What each leaf of the run became, in file order.
+    std::vector<LeafFate> fates;
+    /// How the run's distances were found; sweptDistances counts the voxels no local method
+    /// answered (rasterize() sweeps those, across runs: the caller must refuse them).
+    RasterStats stats;
+    /// A strictly negative value was seen (rasterize() clears the grid of a shape that is not
+    /// an exact distance when no run saw one: a zero set without an inside).
+    bool anyInside = false;
+};
+
+/// @brief rasterize() in pieces, for processes that each build a run of leaves: the leaves the
+/// band may cross in file order (as partition() splits them), each run built on its own, and
+/// the grid's nodes and tiles from what every leaf became. Leaves and structure together are
+/// rasterize()'s grid, voxel for voxel and node for node.
+/// @details Every process constructs it from the same shape and settings (the interval descent:
+/// no voxel is evaluated). The voxels no local method answers (in bands wider than the default,
+/// near edges and corners of shapes that are not exact distances) need fast sweeping across
+/// runs, which this does not do: build() counts them.
+class RasterRuns
+{
+public:
+    /// @throw what rasterize() throws for bad settings or shapes; openvdb::ValueError for dense
+    /// sampling or a shape that is its own raster (isOwnRaster)
+    RasterRuns(const implicit::Implicit::Ptr& shape, const RasterSettings& settings);
+    ~RasterRuns();
+    RasterRuns(const RasterRuns&) = delete;
+    RasterRuns& operator=(const RasterRuns&) = delete;
+
+    /// The number of leaves the band may cross (partition()'s Partition::leaves).
+    std::uint64_t leaves() const;
+
+    /// Build leaves [first, first + count) in file order, in parallel, as rasterize() builds
+    /// them. @throw openvdb::ValueError for a run beyond leaves(); openvdb::RuntimeError if the
+    /// settings' interrupter cancels
+    RunResult build(std::uint64_t first, std::uint64_t count) const;
+
+    /// The grid rasterize() makes, but for its leaves: the same transform, class, name, nodes
+    /// and tiles (pruned as rasterize() prunes), with an active tile of value 0 in a 128^3 node
+    /// wherever the grid has a leaf. @a fates: every leaf's, in file order (the runs' fates
+    /// joined); @a anyInside: any run's. @throw openvdb::ValueError for a wrong number of fates
+    openvdb::FloatGrid::Ptr skeleton(const std::vector<LeafFate>& fates, bool anyInside) const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
 
 } // namespace ivdb::raster

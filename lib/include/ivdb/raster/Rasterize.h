@@ -90,6 +90,10 @@ struct RasterSettings
 openvdb::FloatGrid::Ptr rasterize(const implicit::Implicit::Ptr& shape,
                                   const RasterSettings& settings);
 
+/// @brief True when @a shape is a mesh or .vdb level set already on the lattice and band of
+/// @a settings (sparse sampling, no bounds): rasterize() returns a copy of its grid.
+bool isOwnRaster(const implicit::Implicit::Ptr& shape, const RasterSettings& settings);
+
 /// @brief The shape that is rasterized: @a shape clipped by the settings' bounds when needed.
 implicit::Implicit::Ptr clipToBounds(const implicit::Implicit::Ptr& shape,
                                      const RasterSettings& settings);

@@ -1,0 +1,53 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+
+#include <ivdb/jobs/Rasterize.h>
+
+#include <mpi.h>
+
+#include <cstdint>
+#include <vector>
+
+namespace ivdb::mpi {
+
+/// @brief What rasterize() reports, the same on every rank.
+struct RasterizeResult
+{
+    int ranks = 1;
+    std::uint64_t leaves = 0;          ///< leaves the band may cross (the unit split over ranks)
+    std::uint64_t activeVoxels = 0;
+    std::uint64_t fileBytes = 0;
+    raster::RasterStats stats;         ///< summed over the ranks
+    double computeSeconds = 0.0;       ///< reading the scene and rasterizing (the slowest rank)
+    double writeSeconds = 0.0;         ///< encoding, gathering and writing the file
+    double totalSeconds = 0.0;
+    /// Per rank: leaves built, active voxels and peak resident memory (bytes).
+    std::vector<std::uint64_t> rankLeaves, rankActiveVoxels, rankPeakMemory;
+    std::vector<std::string> notes;    ///< the scene's (open meshes, rebuilt .vdb inputs)
+};
+
+/// @brief jobs::rasterize() over the ranks of @a comm, into one .vdb file that all of them write
+/// at once: the file jobs::rasterize() writes, byte for byte but its random UUID.
+/// @details Every rank reads the scene and runs the interval descent (no voxel evaluated) to
+/// find the leaves the band may cross, in file order (raster::RasterRuns); rank r builds the
+/// r-th of as many equal runs of them (raster::partition's split) on its threads and encodes
+/// its leaves' buffers (io::encodeLeafRun). Rank 0 gathers what each leaf became and the
+/// leaves' masks and table entries, builds the grid's nodes and tiles (RasterRuns::skeleton)
+/// and the file's head (io::vdbFileHead); then every rank writes its buffers at its offset (a
+/// prefix sum) into a temporary file in the output's folder with MPI-IO, and rank 0 renames it
+/// over the output once every rank has written.
+/// Collective: call it on every rank of @a comm with the same options.
+/// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own, so a
+/// ParamError keeps its parameter): the errors of jobs::rasterize(); openvdb::RuntimeError for
+/// dense sampling, a keyed scene, or voxels no local distance method answers (in bands wider
+/// than the default, near edges and corners of shapes that are not exact distances), which need
+/// fast sweeping across ranks;
+/// openvdb::IoError when the file cannot be written. Nothing is written on any error: the
+/// temporary file is removed and an existing output is left as it was.
+RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& options);
+
+/// @brief Threads each rank should use: the cores of its machine shared among the ranks of
+/// @a comm on that machine (at least 1). Collective.
+int threadsPerRank(MPI_Comm comm);
+
+} // namespace ivdb::mpi

@@ -1,0 +1,143 @@
+// SPDX-License-Identifier: Apache-2.0
+// ivdb-mpi: ivdb's commands over MPI ranks (`mpirun -np N ivdb-mpi rasterize ...`), each rank on
+// its share of its machine's cores, writing one .vdb file together. Parsing, printing and error
+// handling are ivdb's (tools/ivdb/Cli.h); only rank 0 prints.
+#include "../ivdb/Cli.h"
+
+#include <ivdb/io/VdbFile.h>
+#include <ivdb/jobs/Rasterize.h>
+#include <ivdb/mpi/Rasterize.h>
+#include <ivdb/util/System.h>
+
+#include <mpi.h>
+#include <tbb/global_control.h>
+
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <optional>
+
+namespace ivdb::cli {
+
+namespace {
+
+int worldRank()
+{
+    int rank = 0;
+    MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+    return rank;
+}
+
+struct RasterizeArgs
+{
+    jobs::RasterizeOptions job;
+    std::string compression = "blosc", distance;
+    bool quiet = false, perRank = false;
+};
+
+int runRasterize(RasterizeArgs& a)
+{
+    const bool printer = worldRank() == 0;
+    a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
+    if (!a.distance.empty()) {
+        a.job.distance = a.distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
+    }
+    std::optional<Progress> progress;
+    if (printer) {
+        progress.emplace("rasterize " + a.job.scene);
+        a.job.interrupter = &*progress;
+    }
+    const mpi::RasterizeResult r = mpi::rasterize(MPI_COMM_WORLD, a.job);
+    if (!printer) return 0;
+    progress->clearLine();
+    printNotes(r.notes);
+    if (a.quiet) return 0;
+    std::uint64_t peak = 0;
+    for (std::uint64_t m : r.rankPeakMemory) peak = std::max(peak, m);
+    std::printf("%s: %llu active voxels on %d ranks, file %s, peak memory per rank up to %s, "
+                "compute %.3f s, write %.3f s, total %.3f s -> %s\n",
+                a.job.scene.c_str(), (unsigned long long)r.activeVoxels, r.ranks,
+                util::formatBytes(double(r.fileBytes)).c_str(),
+                util::formatBytes(double(peak)).c_str(), r.computeSeconds, r.writeSeconds,
+                r.totalSeconds, a.job.output.c_str());
+    const raster::RasterStats& st = r.stats;
+    if (st.searchedDistances + st.approximateDistances > 0) {
+        std::printf("  true distances: %llu voxels by foot points, %llu by the lattice search "
+                    "(%llu of them approximate)\n",
+                    (unsigned long long)st.localDistances,
+                    (unsigned long long)(st.searchedDistances + st.approximateDistances),
+                    (unsigned long long)st.approximateDistances);
+    }
+    if (a.perRank) {
+        for (int k = 0; k < r.ranks; ++k) {
+            const std::size_t i = std::size_t(k);
+            std::printf("  rank %d: %llu leaves, %llu active voxels, peak memory %s\n", k,
+                        (unsigned long long)(i < r.rankLeaves.size() ? r.rankLeaves[i] : 0),
+                        (unsigned long long)(i < r.rankActiveVoxels.size() ? r.rankActiveVoxels[i] : 0),
+                        util::formatBytes(double(r.rankPeakMemory[i])).c_str());
+        }
+    }
+    std::fflush(stdout);
+    return 0;
+}
+
+void addRasterizeMpi(CLI::App& app, Action& action)
+{
+    auto a = std::make_shared<RasterizeArgs>();
+    Command cmd(app, "rasterize",
+        "Rasterize a JSON scene over the MPI ranks into one narrow-band level set .vdb (grid "
+        "'surface'): the file ivdb rasterize writes, every rank writing its part");
+    cmd.add("scene", a->job.scene, "Scene file (JSON; see docs/scene-format.md)")->required();
+    cmd.add("-o,--output", a->job.output, "Output .vdb file (written by all ranks into a "
+            "temporary file that replaces it once all have written)", &param::kOutput)
+        ->required();
+    cmd.add("--voxel-size", a->job.voxelSize,
+            "World units per voxel (overrides the scene's voxel_size); > 0", &param::kVoxelSize);
+    cmd.add("--half-width", a->job.halfWidth,
+            "Narrow-band half width in voxels (overrides the scene's half_width, default 3); "
+            "in [1, 1000]", &param::kHalfWidth);
+    cmd.add("--distance", a->distance,
+            "exact: true signed distances; bound: a CSG of exact distances stored as min / max "
+            "(overrides the scene's \"distance\", default exact)", &param::kDistance)
+        ->check(CLI::IsMember({"exact", "bound"}));
+    addWriteOptions(cmd, a->compression, a->job.write.half);
+    addQuietFlag(cmd, a->quiet);
+    cmd.flag("--per-rank", a->perRank, "Also print each rank's leaves, voxels and peak memory");
+    cmd.onRun(action, [a]() { return runRasterize(*a); });
+}
+
+} // namespace
+
+} // namespace ivdb::cli
+
+int main(int argc, char** argv)
+{
+    int provided = 0;
+    MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
+    // Each rank on its share of its machine's cores (--threads lowers it further).
+    const int threads = ivdb::mpi::threadsPerRank(MPI_COMM_WORLD);
+    int code = 0;
+    {
+        tbb::global_control share(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+        const int rank = ivdb::cli::worldRank();
+        ivdb::cli::Program program;
+        program.name = "ivdb-mpi";
+        program.description = "ivdb-mpi: ivdb's rasterizing over MPI ranks, into one .vdb file "
+                              "(run as mpirun -np N ivdb-mpi COMMAND ...)";
+        program.commandList = "rasterize";
+        program.addCommands = [](CLI::App& app, ivdb::cli::Action& action) {
+            ivdb::cli::addRasterizeMpi(app, action);
+        };
+        program.printsErrors = [rank] { return rank == 0; };
+        program.handlesSignals = rank == 0;
+        code = ivdb::cli::run(argc, argv, program);
+    }
+    // Done (and any error printed): when a rank exits non-zero, mpirun stops the others, which
+    // may still be finishing; they end silently.
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) std::signal(sig, SIG_DFL);
+    // Every rank agrees on the exit code: the worst.
+    int worst = code;
+    MPI_Allreduce(&code, &worst, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+    MPI_Finalize();
+    return worst;
+}
