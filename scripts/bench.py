@@ -35,7 +35,12 @@ Section "mesh" (a mesh as a scene, issue 17):
     meshToLevelSet, written to a .vdb): compute (each one's own figure) and wall time;
   * `ivdb rasterize data/knot_smooth.json` (the mesh smooth-unioned with implicit shapes):
     compute, and how the true distances were found.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|sequence|all]
+Section "mpi" (ivdb-mpi, issue 16):
+  * `ivdb rasterize` and `mpirun -np N ivdb-mpi rasterize` for N = 1..4 (--bind-to none, oversubscribed
+    past the cores) of the radius-1600 sphere (400 with --quick): compute, write and total time
+    and the largest peak memory of a rank against the one process, interleaved;
+  * `ivdb plan` of a sphere of about 10^10 active voxels on 64 and 512 ranks.
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|sequence|mpi|all]
 [--reps N] [--quick]
 """
 import argparse
@@ -91,7 +96,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
-    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "mesh", "sequence", "all"],
+    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "mesh", "sequence", "mpi",
+                                          "all"],
                     default="all")
     args = ap.parse_args()
     reps = 3 if args.quick else args.reps
@@ -113,6 +119,8 @@ def main():
             bench_mesh(tmp, reps)
         if args.section in ("sequence", "all"):
             bench_sequence(tmp, reps)
+        if args.section in ("mpi", "all"):
+            bench_mpi(tmp, 3 if args.quick else min(reps, 3), args.quick)
 
 
 MESH_TO_LEVEL_SET = """
@@ -207,6 +215,76 @@ def bench_sequence(tmp, reps):
     print(f"\nThe growing sphere by a shell loop of `vdb_tool -sphere ... -write`, one process a "
           f"frame: {t['grow_vdb_tool']:.2f} s; ivdb is **{t['grow_vdb_tool'] / t['grow_auto']:.2f}x "
           f"faster**.\n")
+
+
+IVDB_MPI = os.path.join(ROOT, "build", "bin", "ivdb-mpi")
+MPI_ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+
+
+def summary_seconds(line, word):
+    """The seconds after `word` in a summary line ("compute 1.234 s")."""
+    return float(line.split(word + " ")[1].split(" s")[0])
+
+
+def bench_mpi(tmp, reps, quick):
+    """ivdb-mpi on 1 to 4 ranks against one ivdb process, and ivdb plan at 10^10 voxels."""
+    radius = 400 if quick else 1600
+    scene = sphere_scene(tmp, radius)
+    out = os.path.join(tmp, "mpi.vdb")
+    runs = {"ivdb": [IVDB, "rasterize", scene, "-o", out]}
+    for n in range(1, 5):
+        runs[n] = ["mpirun", "--bind-to", "none", "--oversubscribe", "-np", str(n), IVDB_MPI,
+                   "rasterize", scene, "-o", out]
+    for n in range(1, 5):
+        runs[n].append("--json")
+    rows = {k: [] for k in runs}
+    for _ in range(reps):
+        for k, cmd in runs.items():
+            if os.path.exists(out):
+                os.remove(out)  # no run pays for unlinking the previous one's file
+            t0 = time.perf_counter()
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                    env=MPI_ENV)
+            _, status, usage = os.wait4(proc.pid, 0)
+            stdout, stderr = proc.stdout.read(), proc.stderr.read()
+            if os.waitstatus_to_exitcode(status) != 0:
+                sys.exit(f"failed: {' '.join(cmd)}\n{stderr}")
+            if k == "ivdb":
+                line = stdout.splitlines()[0]
+                compute, total = summary_seconds(line, "compute"), summary_seconds(line, "total")
+                rows[k].append((compute, total - compute, total, usage.ru_maxrss / 1024.0))
+            else:
+                j = json.loads(stdout)
+                peak = max(r["peak_memory_bytes"] for r in j["per_rank"]) / 2**20
+                rows[k].append((j["compute_seconds"], j["write_seconds"], j["total_seconds"], peak))
+    med = {k: [statistics.median(x[i] for x in v) for i in range(4)] for k, v in rows.items()}
+    one = med["ivdb"]
+    print(f"Radius-{radius} sphere, `mpirun --bind-to none --oversubscribe -np N ivdb-mpi rasterize` "
+          f"on {os.cpu_count()} cores (each rank on cores / ranks threads, at least one), medians of "
+          f"{reps} interleaved runs:\n")
+    print("| run | compute | write | total | largest peak memory of a rank | vs one process |")
+    print("|---|---|---|---|---|---|")
+    print(f"| ivdb (one process) | {one[0]:.2f} s | {one[1]:.2f} s | {one[2]:.2f} s | {one[3]:.0f} MB | 1.00x |")
+    for n in range(1, 5):
+        m = med[n]
+        print(f"| ivdb-mpi, {n} rank{'s' if n > 1 else ''} | {m[0]:.2f} s | {m[1]:.2f} s | {m[2]:.2f} s | "
+              f"{m[3]:.0f} MB | {m[3] / one[3]:.2f}x |")
+    # Sizing a cluster: a sphere of about 10^10 active voxels (6 voxels across its surface).
+    big = 11500
+    print(f"\n`ivdb plan` of a radius-{big} sphere (voxel size 1/{big}):\n")
+    print("| ranks | leaves | estimated active voxels | memory | per rank: voxels | memory | balance | plan time |")
+    print("|---|---|---|---|---|---|---|---|")
+    for ranks in (64, 512):
+        r = subprocess.run([IVDB, "plan", os.path.join(ROOT, "data", "sphere.json"), "--ranks", str(ranks),
+                            "--voxel-size", repr(1.0 / big), "--json"], capture_output=True, text=True)
+        if r.returncode != 0:
+            sys.exit(r.stderr)
+        p = json.loads(r.stdout)
+        share = max(p["per_rank"], key=lambda x: x["leaves"])
+        print(f"| {ranks} | {p['leaves']:,} | {p['active_voxels']:.3g} | {p['memory_bytes'] / 1e9:.1f} GB | "
+              f"{share['active_voxels']:.3g} | {share['memory_bytes'] / 1e9:.2f} GB | "
+              f"{p['balance']:.3f} | {p['seconds']:.1f} s |")
+    print()
 
 
 def gbench_medians(pattern, reps):

@@ -31,7 +31,7 @@ def data(name):
 
 
 def mpi(ranks, *args):
-    return subprocess.run(["mpirun", "--oversubscribe", "-np", str(ranks), IVDB_MPI, *args],
+    return subprocess.run(["mpirun", "--oversubscribe", "--bind-to", "none", "-np", str(ranks), IVDB_MPI, *args],
                           capture_output=True, text=True, env=ENV, timeout=600)
 
 
@@ -123,6 +123,34 @@ class TestMpiRasterize(unittest.TestCase):
         voxels = sum(int(l.split(",")[1].split()[0]) for l in lines)
         total = int(r.stdout.split(":")[1].split()[0])
         self.assertEqual(voxels, total)
+        # --json: the same figures, with bytes; the leaves split evenly and add up.
+        import json
+        r = mpi(3, "rasterize", data("sphere.json"), "-o", self.path("s.vdb"), "--json")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        j = json.loads(r.stdout)
+        self.assertEqual(j["ranks"], 3)
+        self.assertEqual(j["active_voxels"], total)
+        self.assertEqual(j["file_bytes"], os.path.getsize(self.path("s.vdb")))
+        self.assertEqual([x["rank"] for x in j["per_rank"]], [0, 1, 2])
+        self.assertEqual(sum(x["active_voxels"] for x in j["per_rank"]), total)
+        self.assertLessEqual(sum(x["leaves"] for x in j["per_rank"]), j["leaves"])
+        self.assertTrue(all(x["peak_memory_bytes"] > 10**6 for x in j["per_rank"]))
+
+    def test_ranks_bound_to_one_core_get_a_note(self):
+        # mpirun binds up to two ranks to one core each by default: their threads would share
+        # it. Rank 0 says how to give them the machine's cores.
+        if (os.cpu_count() or 1) < 2:
+            self.skipTest("one core: nothing to share")
+        out = self.path("s.vdb")
+        r = subprocess.run(["mpirun", "--bind-to", "core", "-np", "1", IVDB_MPI, "rasterize",
+                            data("sphere.json"), "-o", out, "-q"],
+                           capture_output=True, text=True, env=ENV, timeout=600)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("ivdb-mpi: note: mpirun bound each rank to 1 of", r.stderr)
+        self.assertIn("--bind-to none", r.stderr)
+        r = mpi(1, "rasterize", data("sphere.json"), "-o", out, "-q")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertNotIn("note:", r.stderr)
 
     def errors(self, args, ranks=3):
         """Run a failing command: every rank fails, rank 0 says why once, nothing is written and an

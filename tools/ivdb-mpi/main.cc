@@ -10,6 +10,7 @@
 #include <ivdb/util/System.h>
 
 #include <mpi.h>
+#include <nlohmann/json.hpp>
 #include <tbb/global_control.h>
 
 #include <csignal>
@@ -32,8 +33,25 @@ struct RasterizeArgs
 {
     jobs::RasterizeOptions job;
     std::string compression = "blosc", distance;
-    bool quiet = false, perRank = false;
+    bool quiet = false, perRank = false, json = false;
 };
+
+void printJson(const RasterizeArgs& a, const mpi::RasterizeResult& r)
+{
+    nlohmann::json out{{"scene", a.job.scene}, {"output", a.job.output}, {"ranks", r.ranks},
+                       {"leaves", r.leaves}, {"active_voxels", r.activeVoxels},
+                       {"file_bytes", r.fileBytes}, {"compute_seconds", r.computeSeconds},
+                       {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds}};
+    nlohmann::json ranks = nlohmann::json::array();
+    for (int k = 0; k < r.ranks; ++k) {
+        const std::size_t i = std::size_t(k);
+        ranks.push_back({{"rank", k}, {"leaves", r.rankLeaves[i]},
+                         {"active_voxels", r.rankActiveVoxels[i]},
+                         {"peak_memory_bytes", r.rankPeakMemory[i]}});
+    }
+    out["per_rank"] = ranks;
+    std::printf("%s\n", out.dump(2).c_str());
+}
 
 int runRasterize(RasterizeArgs& a)
 {
@@ -51,6 +69,10 @@ int runRasterize(RasterizeArgs& a)
     if (!printer) return 0;
     progress->clearLine();
     printNotes(r.notes);
+    if (a.json) {
+        printJson(a, r);
+        return 0;
+    }
     if (a.quiet) return 0;
     std::uint64_t peak = 0;
     for (std::uint64_t m : r.rankPeakMemory) peak = std::max(peak, m);
@@ -103,6 +125,7 @@ void addRasterizeMpi(CLI::App& app, Action& action)
     addWriteOptions(cmd, a->compression, a->job.write.half);
     addQuietFlag(cmd, a->quiet);
     cmd.flag("--per-rank", a->perRank, "Also print each rank's leaves, voxels and peak memory");
+    cmd.flag("--json", a->json, "Print the summary as JSON, with every rank's figures (bytes)");
     cmd.onRun(action, [a]() { return runRasterize(*a); });
 }
 
@@ -115,11 +138,18 @@ int main(int argc, char** argv)
     int provided = 0;
     MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
     // Each rank on its share of its machine's cores (--threads lowers it further).
-    const int threads = ivdb::mpi::threadsPerRank(MPI_COMM_WORLD);
+    const ivdb::mpi::ThreadShare share = ivdb::mpi::threadShare(MPI_COMM_WORLD);
     int code = 0;
     {
-        tbb::global_control share(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism,
+                                  std::size_t(share.threads));
         const int rank = ivdb::cli::worldRank();
+        if (rank == 0 && share.boundCores < share.cores / share.ranksHere) {
+            // Open MPI binds each of up to two ranks to one core unless told otherwise.
+            std::fprintf(stderr, "ivdb-mpi: note: mpirun bound each rank to %d of this machine's "
+                         "%d cores (%d ranks here): add --bind-to none to give each rank its "
+                         "share of them\n", share.boundCores, share.cores, share.ranksHere);
+        }
         ivdb::cli::Program program;
         program.name = "ivdb-mpi";
         program.description = "ivdb-mpi: ivdb's rasterizing over MPI ranks, into one .vdb file "

@@ -272,14 +272,60 @@ public:
             out.codes.insert(out.codes.end(), c.masks.begin(), c.masks.end());
             out.sizes.insert(out.sizes.end(), c.sizes.begin(), c.sizes.end());
         }
-        out.masks.reserve(n);
-        for (std::size_t i = 0; i < n; ++i) {
-            const LeafT& leaf = mLeaves.leaf(i);
-            out.masks.push_back(leaf.valueMask());
-            out.activeVoxels += leaf.onVoxelCount();
-            leaf.evalActiveBoundingBox(out.activeBox, true);
+        // The masks, active voxels and their box, in parallel, a word at a time.
+        out.masks.resize(n);
+        struct Sums
+        {
+            std::uint64_t active = 0;
+            openvdb::CoordBBox box;
+        };
+        std::vector<Sums> sums((n + kTaskLeaves - 1) / kTaskLeaves);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sums.size(), 1),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t c = r.begin(); c != r.end(); ++c) {
+                for (std::size_t i = c * kTaskLeaves; i < std::min(n, (c + 1) * kTaskLeaves); ++i) {
+                    const LeafT& leaf = mLeaves.leaf(i);
+                    out.masks[i] = leaf.valueMask();
+                    sums[c].active += leaf.onVoxelCount();
+                    expandByActive(sums[c].box, leaf.valueMask(), leaf.origin());
+                }
+            }
+        });
+        for (const Sums& s : sums) {
+            out.activeVoxels += s.active;
+            out.activeBox.expand(s.box);
         }
         return out;
+    }
+
+    /// Grow @a box by the active voxels of the leaf at @a origin with value mask @a mask (the
+    /// box LeafNode::evalActiveBoundingBox finds): x from the first and last non-empty word
+    /// (a word is an x slice), y and z from the bytes and bits of the words' union.
+    static void expandByActive(openvdb::CoordBBox& box, const typename LeafT::NodeMaskType& mask,
+                               const openvdb::Coord& origin)
+    {
+        static_assert(LeafT::DIM == 8, "a word of the mask is an x slice of 8 x 8 voxels");
+        int x0 = -1, x1 = -1;
+        std::uint64_t any = 0;
+        for (int w = 0; w < 8; ++w) {
+            const std::uint64_t word = mask.template getWord<std::uint64_t>(openvdb::Index(w));
+            if (!word) continue;
+            if (x0 < 0) x0 = w;
+            x1 = w;
+            any |= word;
+        }
+        if (!any) return;
+        int y0 = 8, y1 = -1;
+        std::uint32_t zs = 0;
+        for (int y = 0; y < 8; ++y) {
+            const std::uint32_t row = std::uint32_t((any >> (8 * y)) & 0xFFu);
+            if (!row) continue;
+            y0 = std::min(y0, y);
+            y1 = y;
+            zs |= row;
+        }
+        const int z0 = __builtin_ctz(zs), z1 = 31 - __builtin_clz(zs);
+        box.expand(openvdb::CoordBBox(origin.offsetBy(x0, y0, z0), origin.offsetBy(x1, y1, z1)));
     }
 
 private:

@@ -25,6 +25,7 @@
 #include <string>
 #include <thread>
 
+#include <sched.h>
 #include <unistd.h>
 
 namespace ivdb::mpi {
@@ -211,14 +212,19 @@ void writeTogether(MPI_Comm comm, const std::string& output, const std::string& 
 
 } // namespace
 
-int threadsPerRank(MPI_Comm comm)
+ThreadShare threadShare(MPI_Comm comm)
 {
     MPI_Comm local;
     MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, rankOf(comm), MPI_INFO_NULL, &local);
-    const int here = sizeOf(local);
+    ThreadShare share;
+    share.ranksHere = sizeOf(local);
     MPI_Comm_free(&local);
-    const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
-    return std::max(1, cores / std::max(1, here));
+    share.cores = int(std::max(1u, std::thread::hardware_concurrency()));
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    share.boundCores = ::sched_getaffinity(0, sizeof(set), &set) == 0 ? CPU_COUNT(&set) : share.cores;
+    share.threads = std::max(1, std::min(share.cores / std::max(1, share.ranksHere), share.boundCores));
+    return share;
 }
 
 RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)

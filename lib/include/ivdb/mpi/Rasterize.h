@@ -46,8 +46,17 @@ struct RasterizeResult
 /// temporary file is removed and an existing output is left as it was.
 RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& options);
 
-/// @brief Threads each rank should use: the cores of its machine shared among the ranks of
-/// @a comm on that machine (at least 1). Collective.
-int threadsPerRank(MPI_Comm comm);
+/// @brief How many threads a rank should use.
+struct ThreadShare
+{
+    int threads = 1;     ///< its share: min(cores / ranksHere, boundCores), at least 1
+    int cores = 1;       ///< the machine's
+    int ranksHere = 1;   ///< ranks of the communicator on this machine
+    int boundCores = 1;  ///< cores the rank may run on (mpirun binds ranks to cores by default)
+};
+
+/// @brief The cores of each rank's machine shared among the ranks of @a comm on that machine,
+/// within the cores the rank is bound to. Collective.
+ThreadShare threadShare(MPI_Comm comm);
 
 } // namespace ivdb::mpi
