@@ -212,13 +212,17 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
     for (const auto& grid : {big, small}) {
         ASSERT_GT(grid->tree().activeTileCount() + grid->tree().leafCount(), 0u);
         const auto skeleton = skeletonOf(*grid);
+        // Every compression on the small grid; the large one (every kind of tile) with Blosc.
+        const bool large = grid == big;
         for (auto c : {ivdb::io::Compression::Blosc, ivdb::io::Compression::Zip, ivdb::io::Compression::None}) {
+            if (large && c != ivdb::io::Compression::Blosc) continue;
             for (bool half : {false, true}) {
                 ivdb::io::WriteOptions options;
                 options.compression = c;
                 options.half = half;
                 ivdb::io::writeVdb(path("whole.vdb"), {grid}, meta, options);
                 for (int runs : {1, 3, 7}) {
+                    if (large && runs == 3) continue;
                     const std::string what = grid->getName() + ", " +
                         ivdb::io::compressionNames()[std::size_t(c)] + (half ? ", half" : "") +
                         ", " + std::to_string(runs) + " runs";

@@ -152,6 +152,25 @@ class TestMpiRasterize(unittest.TestCase):
         self.assertEqual(r.returncode, 0, r.stderr)
         self.assertNotIn("note:", r.stderr)
 
+    def test_a_killed_rank_ends_the_run_and_writes_nothing(self):
+        # Rank 1 is killed (SIGKILL) while the ranks rasterize: Open MPI stops the others, the run
+        # fails, and the output keeps its old contents.
+        scene = self.path("big.json")
+        with open(scene, "w") as f:
+            f.write('{"voxel_size": 0.001, "shape": {"type": "sphere", "radius": 1}}')
+        out = self.path("kept.vdb")
+        with open(out, "wb") as f:
+            f.write(b"old contents")
+        rank = ('if [ "$OMPI_COMM_WORLD_RANK" = 1 ]; then "$0" "$@" & sleep 1; kill -9 $!; wait; '
+                'exit 137; fi; exec "$0" "$@"')
+        r = subprocess.run(["mpirun", "--oversubscribe", "--bind-to", "none", "-np", "3", "sh", "-c",
+                            rank, IVDB_MPI, "rasterize", scene, "-o", out],
+                           capture_output=True, text=True, env=ENV, timeout=600)
+        self.assertNotEqual(r.returncode, 0, r.stdout)
+        self.assertNotIn("active voxels", r.stdout)
+        with open(out, "rb") as f:
+            self.assertEqual(f.read(), b"old contents")
+
     def errors(self, args, ranks=3):
         """Run a failing command: every rank fails, rank 0 says why once, nothing is written and an
         existing output is left as it was."""
