@@ -17,6 +17,7 @@
 
 #include "../TempDirTest.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <filesystem>
@@ -228,8 +229,10 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
                         ", " + std::to_string(runs) + " runs";
                     ivdb::io::LeafRun all;
                     std::string body;
+                    std::vector<ivdb::io::LeafRun> parts;
                     for (const auto& part : leafRuns(*grid, runs)) {
-                        const ivdb::io::LeafRun run = ivdb::io::encodeLeafRun(*part, options);
+                        parts.push_back(ivdb::io::encodeLeafRun(*part, options));
+                        const ivdb::io::LeafRun& run = parts.back();
                         const std::size_t before = body.size();
                         all.appendEntries(run);
                         for (const auto& piece : run.pieces) body += piece;
@@ -237,8 +240,26 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
                     }
                     ASSERT_EQ(all.masks.size(), grid->tree().leafCount()) << what;
                     EXPECT_EQ(all.activeVoxels, grid->activeVoxelCount()) << what;
-                    const std::string head =
+                    const ivdb::io::FileHead fileHead =
                         ivdb::io::vdbFileHead(*skeleton, all, body.size(), meta, options);
+                    // The head's own parts and each run's masks, as the ranks write them: every
+                    // byte of the head written exactly once.
+                    std::string head(fileHead.bytes.size(), '\0');
+                    std::vector<int> writes(head.size(), 0);
+                    const auto put = [&](std::uint64_t at, const char* data, std::uint64_t n) {
+                        ASSERT_LE(at + n, head.size()) << what;
+                        head.replace(at, n, data, n);
+                        for (std::uint64_t i = at; i < at + n; ++i) ++writes[i];
+                    };
+                    for (const auto& [at, n] : fileHead.nonMaskParts()) put(at, fileHead.bytes.data() + at, n);
+                    std::uint64_t leaf = 0;
+                    for (const auto& run : parts) {
+                        for (const auto& [at, data] : fileHead.maskWrites(leaf, run.masks)) {
+                            put(at, data.data(), data.size());
+                        }
+                        leaf += run.masks.size();
+                    }
+                    EXPECT_EQ(std::count(writes.begin(), writes.end(), 1), std::ptrdiff_t(head.size())) << what;
                     std::string a = bytes(path("whole.vdb")), b = head + body;
                     ASSERT_EQ(a.size(), b.size()) << what;
                     a.replace(21, 36, 36, '-');
@@ -255,4 +276,9 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
     auto skeleton = skeletonOf(*small);
     ivdb::io::LeafRun none;
     EXPECT_THROW(ivdb::io::vdbFileHead(*skeleton, none, 0, meta, {}), openvdb::ValueError);
+    // Masks of leaves the head does not hold are refused.
+    ivdb::io::LeafRun entries;
+    for (const auto& part : leafRuns(*small, 1)) entries = ivdb::io::encodeLeafRun(*part, {});
+    const ivdb::io::FileHead head = ivdb::io::vdbFileHead(*skeleton, entries, 0, meta, {});
+    EXPECT_THROW(head.maskWrites(1, entries.masks), openvdb::ValueError);
 }

@@ -776,9 +776,11 @@ void writeNodeTable(std::ostream& os, const typename NodeT::NodeMaskType& childM
 }
 
 /// Tree::writeTopology of the grid @a skeleton stands for: its 128^3 nodes' active tiles are
-/// leaves, whose value masks are @a masks in file order.
+/// leaves, of which there are @a leafCount; their value masks are written as zeros, and where
+/// they go is recorded in @a runs (offsets from @a base, the stream's start in the file).
 void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
-                           const std::vector<LeafRun::Mask>& masks, bool toHalf)
+                           std::uint64_t leafCount, bool toHalf, std::uint64_t base,
+                           std::vector<FileHead::MaskRun>& runs)
 {
     const std::int32_t bufferCount = 1;
     os.write(reinterpret_cast<const char*>(&bufferCount), sizeof(bufferCount));
@@ -792,7 +794,8 @@ void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
     const openvdb::Index children = root.childCount();
     os.write(reinterpret_cast<const char*>(&tiles), sizeof(tiles));
     os.write(reinterpret_cast<const char*>(&children), sizeof(children));
-    std::size_t next = 0;
+    std::uint64_t next = 0;
+    const LeafRun::Mask zero;
     if (tiles + children > 0) {
         for (auto it = root.cbeginValueAll(); it; ++it) {
             const openvdb::Coord o = it.getCoord();
@@ -816,27 +819,27 @@ void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
                 const Int1T& n1 = *it1;
                 // The active tiles are the leaves: they become the child mask.
                 const Int1T::NodeMaskType leaves = n1.getValueMask();
-                if (next + leaves.countOn() > masks.size()) {
-                    OPENVDB_THROW(openvdb::ValueError, "the skeleton has more leaves than the " +
-                                  std::to_string(masks.size()) + " the runs hold");
-                }
                 writeNodeTable<Int1T>(os, leaves, Int1T::NodeMaskType(),
                     [&](openvdb::Index i) { return n1.getValue(n1.offsetToGlobalCoord(i)); }, toHalf);
-                for (auto on = leaves.beginOn(); on; ++on) masks[next++].save(os);
+                const std::uint64_t count = leaves.countOn();
+                if (count == 0) continue;
+                runs.push_back({next, count, base + std::uint64_t(os.tellp())});
+                for (std::uint64_t k = 0; k < count; ++k) zero.save(os);
+                next += count;
             }
         }
     }
-    if (next != masks.size()) {
+    if (next != leafCount) {
         OPENVDB_THROW(openvdb::ValueError, "the skeleton has " + std::to_string(next) +
-                      " leaves, the runs " + std::to_string(masks.size()));
+                      " leaves, the runs " + std::to_string(leafCount));
     }
 }
 
 } // namespace
 
-std::string vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& leaves,
-                        std::uint64_t bufferBytes, const openvdb::MetaMap& fileMetadata,
-                        const WriteOptions& options)
+FileHead vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& leaves,
+                     std::uint64_t bufferBytes, const openvdb::MetaMap& fileMetadata,
+                     const WriteOptions& options)
 {
     auto grid = openvdb::ConstPtrCast<openvdb::FloatGrid>(skeletonIn.copy());
     if (options.half) grid->setSaveFloatAsHalf(true);
@@ -866,14 +869,16 @@ std::string vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& lea
     gd.setGridPos(std::int64_t(out.size()));
 
     // GridWriter::write's record, with the statistics and table from the runs' entries.
+    const std::size_t n = leaves.codes.size();
     std::string head;
+    std::vector<FileHead::MaskRun> runs;
     {
         StringSink hsink(head);
         std::ostream hs(&hsink);
         hs.copyfmt(os);
         openvdb::io::setDataCompression(hs, gridFlags);
         grid->writeTransform(hs);
-        writeSkeletonTopology(hs, grid->tree(), leaves.masks, half);
+        writeSkeletonTopology(hs, grid->tree(), n, half, 0, runs);
     }
     auto meta = openvdb::ConstPtrCast<openvdb::GridBase>(grid->copyGrid());
     const auto leafBytes = openvdb::FloatTree::LeafNodeType(openvdb::Coord(), 0.0f).memUsage();
@@ -882,18 +887,16 @@ std::string vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& lea
     meta->insertMeta(openvdb::GridBase::META_FILE_BBOX_MAX,
                      openvdb::Vec3IMetadata(leaves.activeBox.max().asVec3i()));
     meta->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::Int64Metadata(std::int64_t(
-        grid->tree().memUsage() + leaves.masks.size() * leafBytes)));
+        grid->tree().memUsage() + n * leafBytes)));
     meta->insertMeta(openvdb::GridBase::META_FILE_VOXEL_COUNT,
                      openvdb::Int64Metadata(std::int64_t(leaves.activeVoxels)));
     meta->insertMeta("file_compression",
                      openvdb::StringMetadata(openvdb::io::compressionToString(gridFlags)));
     openvdb::io::DelayedLoadMetadata table;
-    const std::size_t n = leaves.masks.size();
     const bool sized = (flags & (openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ZIP)) != 0;
-    if (leaves.codes.size() != n || (sized && leaves.sizes.size() != n)) {
+    if (sized && leaves.sizes.size() != n) {
         OPENVDB_THROW(openvdb::ValueError, "the runs' entries disagree: " + std::to_string(n) +
-                      " masks, " + std::to_string(leaves.codes.size()) + " codes, " +
-                      std::to_string(leaves.sizes.size()) + " sizes");
+                      " codes, " + std::to_string(leaves.sizes.size()) + " sizes");
     }
     if (n > 0) {
         table.resizeMask(n);
@@ -907,6 +910,9 @@ std::string vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& lea
     os.write(reinterpret_cast<const char*>(&gridFlags), sizeof(gridFlags));
     meta->insertMeta("file_delayed_load", table);
     meta->writeMeta(os);
+    // The mask runs' offsets were from the record's start: now from the file's.
+    const std::uint64_t headStart = out.size();
+    for (auto& r : runs) r.offset += headStart;
     os.write(head.data(), std::streamsize(head.size()));
     const std::int64_t blockPos = std::int64_t(out.size());
     gd.setBlockPos(blockPos);
@@ -919,7 +925,56 @@ std::string vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& lea
         gd.writeStreamPos(ps);
     }
     out.replace(offsets, pos.size(), pos);
+    FileHead result;
+    result.bytes = std::move(out);
+    result.maskRuns = std::move(runs);
+    return result;
+}
+
+std::vector<std::pair<std::uint64_t, std::string>>
+FileHead::maskWrites(std::uint64_t first, const std::vector<LeafRun::Mask>& masks) const
+{
+    std::vector<std::pair<std::uint64_t, std::string>> out;
+    if (masks.empty()) return out;
+    const std::uint64_t end = first + masks.size();
+    // The run holding leaf `first`: the last that starts at or before it.
+    auto it = std::upper_bound(maskRuns.begin(), maskRuns.end(), first,
+        [](std::uint64_t leaf, const MaskRun& r) { return leaf < r.firstLeaf; });
+    if (it == maskRuns.begin() || end > maskRuns.back().firstLeaf + maskRuns.back().leaves) {
+        OPENVDB_THROW(openvdb::ValueError, "leaves " + std::to_string(first) + " to " +
+                      std::to_string(end) + " are not all in the head's topology");
+    }
+    const std::size_t size = LeafRun::Mask::memUsage();
+    for (--it; it != maskRuns.end() && it->firstLeaf < end; ++it) {
+        const std::uint64_t a = std::max(first, it->firstLeaf);
+        const std::uint64_t b = std::min(end, it->firstLeaf + it->leaves);
+        std::string bytes;
+        bytes.reserve((b - a) * size);
+        {
+            StringSink sink(bytes);
+            std::ostream os(&sink);
+            for (std::uint64_t i = a; i < b; ++i) masks[i - first].save(os);
+        }
+        out.emplace_back(it->offset + (a - it->firstLeaf) * size, std::move(bytes));
+    }
     return out;
+}
+
+std::vector<std::pair<std::uint64_t, std::uint64_t>> FileHead::nonMaskParts() const
+{
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> out;
+    std::uint64_t at = 0;
+    for (const MaskRun& r : maskRuns) {
+        if (r.offset > at) out.emplace_back(at, r.offset - at);
+        at = r.offset + r.leaves * LeafRun::Mask::memUsage();
+    }
+    if (bytes.size() > at) out.emplace_back(at, bytes.size() - at);
+    return out;
+}
+
+void FileHead::putMasks(std::uint64_t first, const std::vector<LeafRun::Mask>& masks)
+{
+    for (const auto& [offset, data] : maskWrites(first, masks)) bytes.replace(offset, data.size(), data);
 }
 
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,

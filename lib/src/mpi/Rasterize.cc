@@ -140,10 +140,18 @@ void asSceneErrors(const jobs::RasterizeOptions& opt, Fn&& fn)
     }
 }
 
-/// Every rank's buffers at its offset in one temporary file, renamed over the output by rank 0
-/// once all have written; on any failure the temporary file is removed.
-void writeTogether(MPI_Comm comm, const std::string& output, const std::string& head,
-                   const std::vector<std::string>& pieces, std::uint64_t offset)
+/// One positioned write of a rank.
+struct Write
+{
+    std::uint64_t offset;
+    const char* data;
+    std::uint64_t size;
+};
+
+/// Every rank's writes (the head's parts, its leaves' masks, its buffers) into one temporary
+/// file, renamed over the output by rank 0 once all have written; on any failure the temporary
+/// file is removed.
+void writeTogether(MPI_Comm comm, const std::string& output, const std::vector<Write>& writes)
 {
     const int rank = rankOf(comm);
     std::string tmp;
@@ -172,21 +180,16 @@ void writeTogether(MPI_Comm comm, const std::string& output, const std::string& 
     });
     try {
         int written = MPI_SUCCESS;
-        auto put = [&](const std::string& data, std::uint64_t at) {
-            for (std::uint64_t done = 0; done < data.size() && written == MPI_SUCCESS; done += kPiece) {
-                const int n = int(std::min<std::uint64_t>(kPiece, data.size() - done));
+        for (const Write& w : writes) {
+            for (std::uint64_t done = 0; done < w.size && written == MPI_SUCCESS; done += kPiece) {
+                const int n = int(std::min<std::uint64_t>(kPiece, w.size - done));
                 MPI_Status status;
-                written = MPI_File_write_at(file, MPI_Offset(at + done), data.data() + done, n,
+                written = MPI_File_write_at(file, MPI_Offset(w.offset + done), w.data + done, n,
                                             MPI_BYTE, &status);
                 int count = 0;
                 if (written == MPI_SUCCESS) MPI_Get_count(&status, MPI_BYTE, &count);
                 if (written == MPI_SUCCESS && count != n) written = MPI_ERR_IO;
             }
-        };
-        if (rank == 0) put(head, 0);
-        for (const std::string& piece : pieces) {
-            put(piece, offset);
-            offset += piece.size();
         }
         const int synced = MPI_File_sync(file);
         const int closed = MPI_File_close(&file);
@@ -344,7 +347,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     MPI_Allgather(&mine, int(sizeof(RunHeader)), MPI_BYTE, headers.data(), int(sizeof(RunHeader)),
                   MPI_BYTE, comm);
 
-    // Rank 0 gathers every leaf's fate, mask and table entry.
+    // Rank 0 gathers every leaf's fate and table entry (each rank keeps its leaves' masks).
     std::vector<raster::LeafFate> fates;
     io::LeafRun all;
     if (rank == 0) {
@@ -356,10 +359,8 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
             recvBlob(comm, r, 1, fates.data() + h.first, h.count);
             io::LeafRun run;
             run.codes.resize(h.leaves);
-            run.masks.resize(h.leaves);
             if (h.hasSizes) run.sizes.resize(h.leaves);
             recvBlob(comm, r, 2, run.codes.data(), h.leaves);
-            recvBlob(comm, r, 3, run.masks.data(), h.leaves * sizeof(io::LeafRun::Mask));
             if (h.hasSizes) recvBlob(comm, r, 4, run.sizes.data(), h.leaves * sizeof(std::int64_t));
             run.activeVoxels = h.activeVoxels;
             if (h.box[3] >= h.box[0]) {
@@ -371,14 +372,12 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     } else {
         sendBlob(comm, 0, 1, built.fates.data(), built.fates.size());
         sendBlob(comm, 0, 2, encoded.codes.data(), encoded.codes.size());
-        sendBlob(comm, 0, 3, encoded.masks.data(), encoded.masks.size() * sizeof(io::LeafRun::Mask));
         if (!encoded.sizes.empty()) {
             sendBlob(comm, 0, 4, encoded.sizes.data(), encoded.sizes.size() * sizeof(std::int64_t));
         }
     }
     built.fates.clear();
     encoded.codes.clear();
-    encoded.masks.clear();
     encoded.sizes.clear();
 
     std::uint64_t activeVoxels = 0, bufferBytes = 0;
@@ -396,7 +395,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     }
 
     // Rank 0: the grid's nodes and tiles, and the file's head.
-    std::string head;
+    io::FileHead head;
     collective(comm, [&] {
         if (rank != 0) return;
         const openvdb::FloatGrid::Ptr skeleton = runs->skeleton(fates, anyInside != 0);
@@ -416,12 +415,31 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     all = io::LeafRun();
     result.activeVoxels = activeVoxels;
 
-    // Every rank writes its buffers after the head and the runs before it.
-    std::uint64_t headBytes = head.size();
+    // Every rank learns where the masks go in the head, and where its buffers go after it.
+    std::uint64_t headBytes = head.bytes.size(), runCount = head.maskRuns.size();
     MPI_Bcast(&headBytes, 1, MPI_UINT64_T, 0, comm);
-    std::uint64_t before = 0;
-    for (int r = 0; r < rank; ++r) before += headers[std::size_t(r)].bytes;
-    if (!opt.output.empty()) writeTogether(comm, opt.output, head, encoded.pieces, headBytes + before);
+    MPI_Bcast(&runCount, 1, MPI_UINT64_T, 0, comm);
+    head.maskRuns.resize(runCount);
+    static_assert(sizeof(io::FileHead::MaskRun) == 3 * sizeof(std::uint64_t), "plain data");
+    MPI_Bcast(head.maskRuns.data(), int(runCount * 3), MPI_UINT64_T, 0, comm);
+    std::uint64_t bytesBefore = 0, leavesBefore = 0;
+    for (int r = 0; r < rank; ++r) {
+        bytesBefore += headers[std::size_t(r)].bytes;
+        leavesBefore += headers[std::size_t(r)].leaves;
+    }
+    std::vector<Write> writes;
+    if (rank == 0) {
+        for (const auto& [at, n] : head.nonMaskParts()) writes.push_back({at, head.bytes.data() + at, n});
+    }
+    std::vector<std::pair<std::uint64_t, std::string>> masks;
+    collective(comm, [&] { masks = head.maskWrites(leavesBefore, encoded.masks); });
+    for (const auto& [at, data] : masks) writes.push_back({at, data.data(), data.size()});
+    std::uint64_t at = headBytes + bytesBefore;
+    for (const std::string& piece : encoded.pieces) {
+        writes.push_back({at, piece.data(), piece.size()});
+        at += piece.size();
+    }
+    if (!opt.output.empty()) writeTogether(comm, opt.output, writes);
     result.fileBytes = opt.output.empty() ? 0 : headBytes + bufferBytes;
     result.writeSeconds = secondsSince(writeStart);
 

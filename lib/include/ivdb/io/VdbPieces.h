@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace ivdb::io {
@@ -32,7 +33,7 @@ struct LeafRun
     /// The pieces' bytes, in total.
     std::uint64_t byteCount() const;
 
-    /// Append @a next's entries (the run after this one); its pieces are not copied.
+    /// Append @a next's entries and masks (the run after this one); its pieces are not copied.
     void appendEntries(const LeafRun& next);
 };
 
@@ -41,19 +42,48 @@ struct LeafRun
 /// in parallel, in file order.
 LeafRun encodeLeafRun(const openvdb::FloatGrid& run, const WriteOptions& options);
 
-/// @brief The bytes of a .vdb file that holds one float grid, up to its leaf buffers: the file
+/// @brief The start of a .vdb file that holds one float grid, up to its leaf buffers, as
+/// vdbFileHead() makes it: the bytes, with every leaf's value mask left zero in the topology,
+/// and where the masks go (each process writes its own leaves' masks there).
+struct FileHead
+{
+    /// The leaves of one 128^3 node: their masks lie one after another from @a offset.
+    struct MaskRun
+    {
+        std::uint64_t firstLeaf = 0, leaves = 0, offset = 0;
+    };
+
+    std::string bytes;
+    std::vector<MaskRun> maskRuns; ///< in file order; they cover every leaf once
+
+    /// The writes that put the masks of leaves [first, first + masks.size()) in place: (offset,
+    /// bytes) pairs, one per mask run they touch.
+    std::vector<std::pair<std::uint64_t, std::string>>
+    maskWrites(std::uint64_t first, const std::vector<LeafRun::Mask>& masks) const;
+
+    /// The parts of the head that are not masks, as (offset, length): what the process that
+    /// writes the head writes, so that no byte is written twice.
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> nonMaskParts() const;
+
+    /// Copy the masks of leaves [first, first + masks.size()) into bytes (one process).
+    void putMasks(std::uint64_t first, const std::vector<LeafRun::Mask>& masks);
+};
+
+/// @brief The start of a .vdb file that holds one float grid, up to its leaf buffers: the file
 /// header (with a new UUID), @a fileMetadata, the grid's descriptor, compression flags,
 /// metadata (with the statistics, compression and delayed-load table io::File adds), transform
-/// and topology. Followed by the runs' bytes in order, it is the file writeVdbStream() writes
-/// for the grid, byte for byte but the UUID.
+/// and topology, with the leaves' masks left to FileHead::maskWrites. With the masks in place
+/// and followed by the runs' bytes in order, it is the file writeVdbStream() writes for the
+/// grid, byte for byte but the UUID.
 /// @param skeleton  the grid but for its leaves: metadata, transform, nodes and tiles, with an
 ///                  active tile in a 128^3 node wherever the grid has a leaf
 ///                  (raster::RasterRuns::skeleton)
-/// @param leaves    every leaf's entries in file order (the runs' joined; pieces unused)
+/// @param leaves    every leaf's table entries, active voxels and box, in file order (the runs'
+///                  joined; their masks and pieces are not used)
 /// @param bufferBytes  the runs' bytes, in total (their byteCount())
 /// @throw openvdb::ValueError if @a leaves does not hold one entry per leaf of @a skeleton
-std::string vdbFileHead(const openvdb::FloatGrid& skeleton, const LeafRun& leaves,
-                        std::uint64_t bufferBytes, const openvdb::MetaMap& fileMetadata,
-                        const WriteOptions& options);
+FileHead vdbFileHead(const openvdb::FloatGrid& skeleton, const LeafRun& leaves,
+                     std::uint64_t bufferBytes, const openvdb::MetaMap& fileMetadata,
+                     const WriteOptions& options);
 
 } // namespace ivdb::io

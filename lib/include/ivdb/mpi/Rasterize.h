@@ -32,10 +32,11 @@ struct RasterizeResult
 /// find the leaves the band may cross, in file order (raster::RasterRuns); rank r builds the
 /// r-th of as many equal runs of them (raster::partition's split) on its threads and encodes
 /// its leaves' buffers (io::encodeLeafRun). Rank 0 gathers what each leaf became and the
-/// leaves' masks and table entries, builds the grid's nodes and tiles (RasterRuns::skeleton)
-/// and the file's head (io::vdbFileHead); then every rank writes its buffers at its offset (a
-/// prefix sum) into a temporary file in the output's folder with MPI-IO, and rank 0 renames it
-/// over the output once every rank has written.
+/// leaves' table entries (10 bytes a leaf), builds the grid's nodes and tiles
+/// (RasterRuns::skeleton) and the file's head (io::vdbFileHead); then every rank writes its
+/// leaves' masks into the head's topology and its buffers at its offset (a prefix sum) into a
+/// temporary file in the output's folder with MPI-IO, and rank 0 renames it over the output
+/// once every rank has written.
 /// Collective: call it on every rank of @a comm with the same options.
 /// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own, so a
 /// ParamError keeps its parameter): the errors of jobs::rasterize(); openvdb::RuntimeError for
