@@ -107,6 +107,17 @@ class TestMpiRasterize(unittest.TestCase):
         self.same_as_ivdb(data("knot_smooth.json"), "--voxel-size", "0.02", ranks=(2, 3))
         self.same_as_ivdb(data("fig1_union.json"), "--distance", "bound", ranks=(2, 3))
 
+    def test_a_level_set_on_the_lattice_is_copied(self):
+        # A scene that is only a .vdb level set on the output's lattice and band is its own
+        # raster: rank 0 copies it, as ivdb does.
+        source = self.path("source.vdb")
+        r = ivdb("rasterize", data("sphere.json"), "-o", source, "-q")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        scene = self.path("copy.json")
+        with open(scene, "w") as f:
+            f.write('{"voxel_size": 0.01, "shape": {"type": "vdb", "file": "source.vdb"}}')
+        self.same_as_ivdb(scene, ranks=(1, 3))
+
     def test_compression_and_half_floats(self):
         self.same_as_ivdb(data("fig1_union.json"), "--compression", "zip", "--half", ranks=(3,))
         out = self.same_as_ivdb(data("sphere.json"), "--compression", "none", ranks=(2,))

@@ -113,15 +113,7 @@ void addRasterizeMpi(CLI::App& app, Action& action)
     cmd.add("-o,--output", a->job.output, "Output .vdb file (written by all ranks into a "
             "temporary file that replaces it once all have written)", &param::kOutput)
         ->required();
-    cmd.add("--voxel-size", a->job.voxelSize,
-            "World units per voxel (overrides the scene's voxel_size); > 0", &param::kVoxelSize);
-    cmd.add("--half-width", a->job.halfWidth,
-            "Narrow-band half width in voxels (overrides the scene's half_width, default 3); "
-            "in [1, 1000]", &param::kHalfWidth);
-    cmd.add("--distance", a->distance,
-            "exact: true signed distances; bound: a CSG of exact distances stored as min / max "
-            "(overrides the scene's \"distance\", default exact)", &param::kDistance)
-        ->check(CLI::IsMember({"exact", "bound"}));
+    addRasterSettings(cmd, a->job, a->distance);
     addWriteOptions(cmd, a->compression, a->job.write.half);
     addQuietFlag(cmd, a->quiet);
     cmd.flag("--per-rank", a->perRank, "Also print each rank's leaves, voxels and peak memory");

@@ -4,6 +4,7 @@
 #include <ivdb/Version.h>
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/jobs/Rasterize.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/openvdb.h>
@@ -172,6 +173,21 @@ void addWriteOptions(Command& cmd, std::string& compression, bool& half)
     cmd.flag("--half", half,
              "Store float values as 16-bit halves (smaller files, 11 significant bits; what "
              "Houdini and vdb_tool offer)");
+}
+
+void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& distance)
+{
+    cmd.add("--voxel-size", job.voxelSize,
+            "World units per voxel (overrides the scene's voxel_size); > 0", &param::kVoxelSize);
+    cmd.add("--half-width", job.halfWidth,
+            "Narrow-band half width in voxels (overrides the scene's half_width, default 3); "
+            "in [1, 1000]", &param::kHalfWidth);
+    cmd.add("--distance", distance,
+            "exact: true signed distances (shapes that are not distances are re-distanced); "
+            "bound: a CSG of exact distances stored as min / max, as OpenVDB's csg tools give "
+            "it, without re-distancing (overrides the scene's \"distance\", default exact)",
+            &param::kDistance)
+        ->check(CLI::IsMember({"exact", "bound"}));
 }
 
 void addQuietFlag(Command& cmd, bool& quiet)

@@ -17,6 +17,10 @@
 #include <utility>
 #include <vector>
 
+namespace ivdb::jobs {
+struct RasterizeOptions;
+}
+
 namespace ivdb::cli {
 
 /// @brief The work a subcommand does once its options are parsed; returns the exit code.
@@ -133,6 +137,11 @@ void addFogFlag(Command& cmd, bool& fog);
 /// @brief --compression and --half of the commands that write a .vdb, bound to @a compression
 /// (a word of io::compressionNames()) and @a half.
 void addWriteOptions(Command& cmd, std::string& compression, bool& half);
+
+/// @brief --voxel-size, --half-width and --distance of the commands that rasterize a scene
+/// (`ivdb rasterize`, `ivdb-mpi rasterize`), bound to @a job and @a distance ("exact" or
+/// "bound"; empty: the scene's).
+void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& distance);
 
 /// @brief The -q flag of the commands that print a summary line.
 void addQuietFlag(Command& cmd, bool& quiet);

@@ -105,22 +105,12 @@ void addRasterize(CLI::App& app, Action& action)
     cmd.add("--parallel-frames", a->parallelFrames, "Frames made at once, in [0, 1024]; 0: as "
             "many as there are threads, while their memory fits", &param::kParallelFrames)
         ->capture_default_str();
-    cmd.add("--voxel-size", a->job.voxelSize,
-            "World units per voxel (overrides the scene's voxel_size); > 0", &param::kVoxelSize);
-    cmd.add("--half-width", a->job.halfWidth,
-            "Narrow-band half width in voxels (overrides the scene's half_width, default 3); "
-            "in [1, 1000]", &param::kHalfWidth);
+    addRasterSettings(cmd, a->job, a->distance);
     cmd.add("--sampling", a->sampling,
             "sparse: interval-pruned, cost grows with the surface; dense: every voxel of the "
             "bounding box (the reference; refuses if it would not fit in memory)", &param::kSampling)
         ->check(CLI::IsMember({"sparse", "dense"}))
         ->capture_default_str();
-    cmd.add("--distance", a->distance,
-            "exact: true signed distances (shapes that are not distances are re-distanced); "
-            "bound: a CSG of exact distances stored as min / max, as OpenVDB's csg tools give "
-            "it, without re-distancing (overrides the scene's \"distance\", default exact)",
-            &param::kDistance)
-        ->check(CLI::IsMember({"exact", "bound"}));
     addWriteOptions(cmd, a->compression, a->job.write.half);
     addFogFlag(cmd, a->job.fog);
     addQuietFlag(cmd, a->quiet);

@@ -84,10 +84,8 @@ void stampRaster(openvdb::GridBase& grid, const RasterizeOptions& opt, const sce
     if (frame) grid.insertMeta("ivdb_frame", openvdb::Int32Metadata(*frame));
 }
 
-namespace {
-
-/// The scene of @a opt at @a frame (unset: not a frame of a sequence).
-scene::Scene loadFrame(const RasterizeOptions& opt, std::optional<double> frame, bool readInputs)
+scene::Scene loadRasterScene(const RasterizeOptions& opt, std::optional<double> frame,
+                             bool readInputs)
 {
     // The overrides first: mesh and vdb nodes are built at them.
     if (opt.voxelSize) check(limits::kVoxelSize, *opt.voxelSize);
@@ -95,21 +93,19 @@ scene::Scene loadFrame(const RasterizeOptions& opt, std::optional<double> frame,
     return scene::loadScene(opt.scene, {opt.voxelSize, opt.halfWidth, frame, readInputs});
 }
 
-RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& sc,
-                               std::optional<int> frame)
+raster::RasterSettings rasterSettings(const scene::Scene& sc, const RasterizeOptions& opt)
 {
-    Stopwatch clock;
-    if (!opt.output.empty()) io::checkOutputPath(opt.output);
-    RasterizeResult result;
-    result.notes = sc.notes;
-    result.settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
-    raster::RasterSettings& settings = result.settings;
+    raster::RasterSettings settings = sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
     settings.sampling = opt.sampling;
     if (opt.distance) settings.distance = *opt.distance;
     settings.interrupter = opt.interrupter;
-    settings.stats = &result.stats;
+    return settings;
+}
+
+void withSceneErrors(const RasterizeOptions& opt, const std::function<void()>& step)
+{
     try {
-        result.surface = raster::rasterize(sc.shape, settings);
+        step();
     } catch (const ParamError& e) {
         // A value the caller gave keeps its parameter (the caller words it); one from the
         // scene file is the file's, named by its key.
@@ -121,16 +117,35 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
         // The shape's own problems (unbounded, too large) are the scene file's.
         OPENVDB_THROW(openvdb::RuntimeError, opt.scene + ": " + util::errorText(e));
     }
+}
+
+void throwNoVoxels(const RasterizeOptions& opt, const raster::RasterSettings& settings,
+                   std::optional<int> frame)
+{
+    std::ostringstream os;
+    os << opt.scene << (frame ? ": frame " + std::to_string(*frame) : std::string())
+       << ": the surface has no voxels at voxel size " << settings.voxelSize
+       << " (no zero crossing inside the bounds, or a shape smaller than a voxel): "
+       << "check the shape and bounds, or use a smaller voxel size; nothing was written";
+    OPENVDB_THROW(openvdb::RuntimeError, os.str());
+}
+
+namespace {
+
+RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& sc,
+                               std::optional<int> frame)
+{
+    Stopwatch clock;
+    if (!opt.output.empty()) io::checkOutputPath(opt.output);
+    RasterizeResult result;
+    result.notes = sc.notes;
+    result.settings = rasterSettings(sc, opt);
+    raster::RasterSettings& settings = result.settings;
+    settings.stats = &result.stats;
+    withSceneErrors(opt, [&] { result.surface = raster::rasterize(sc.shape, settings); });
     result.computeSeconds = clock.lap();
     result.activeVoxels = result.surface->activeVoxelCount();
-    if (result.activeVoxels == 0) {
-        std::ostringstream os;
-        os << opt.scene << (frame ? ": frame " + std::to_string(*frame) : std::string())
-           << ": the surface has no voxels at voxel size " << settings.voxelSize
-           << " (no zero crossing inside the bounds, or a shape smaller than a voxel): "
-           << "check the shape and bounds, or use a smaller voxel size; nothing was written";
-        OPENVDB_THROW(openvdb::RuntimeError, os.str());
-    }
+    if (result.activeVoxels == 0) throwNoVoxels(opt, settings, frame);
     settings.stats = nullptr;
     result.gridBytes = result.surface->memUsage();
     stampRaster(*result.surface, opt, sc, settings, frame);
@@ -144,7 +159,7 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
 
 RasterizeResult rasterize(const RasterizeOptions& opt)
 {
-    const scene::Scene sc = loadFrame(opt, std::nullopt, true);
+    const scene::Scene sc = loadRasterScene(opt, std::nullopt, true);
     if (sc.animated) {
         throw ParamError(param::kFrames, opt.scene + " has keyed values (an animation): choose "
                          "the frames to write, with # in the output name where the frame number "
@@ -195,7 +210,7 @@ bool isWholeFrame(const std::string& path)
 std::vector<int> sequenceFrames(const SequenceOptions& opt)
 {
     const RasterizeOptions& base = opt.base;
-    const scene::Scene first = loadFrame(base, std::nullopt, false);
+    const scene::Scene first = loadRasterScene(base, std::nullopt, false);
     if (!first.animated) {
         throw ParamError(param::kFrames, "are for animated scenes, and " + base.scene + " has "
                          "no keyed value: nothing moves from frame to frame (docs/scene-format.md"
@@ -213,7 +228,7 @@ std::vector<int> sequenceFrames(const SequenceOptions& opt)
     }
     io::checkOutputPath(scene::frameFileName(base.output, frames.front()));
     // Every frame's values are checked before any file is written.
-    for (int f : frames) sceneSettings(loadFrame(base, f, false), base.scene, base.voxelSize, base.halfWidth);
+    for (int f : frames) sceneSettings(loadRasterScene(base, f, false), base.scene, base.voxelSize, base.halfWidth);
     return frames;
 }
 
@@ -241,7 +256,7 @@ public:
             RasterizeOptions one = mOpt.base;
             one.output = report.output;
             one.interrupter = mOpt.base.interrupter ? &progress : nullptr;
-            report.result = rasterizeScene(one, loadFrame(one, report.frame, true), report.frame);
+            report.result = rasterizeScene(one, loadRasterScene(one, report.frame, true), report.frame);
             // A written frame is in its file: frames that wait for an earlier one to be reported
             // keep no grid, so a sequence holds only the frames being made.
             if (!report.output.empty()) {

@@ -121,25 +121,6 @@ std::string mpiError(int code)
     return std::string(text, std::size_t(length));
 }
 
-/// The errors of jobs::rasterize for a scene's own values: a ParamError the caller did not give
-/// is the scene file's, named by its key; the shape's problems are the file's too.
-template<typename Fn>
-void asSceneErrors(const jobs::RasterizeOptions& opt, Fn&& fn)
-{
-    try {
-        fn();
-    } catch (const ParamError& e) {
-        const bool given = (e.param() == param::kVoxelSize.id && opt.voxelSize) ||
-                           (e.param() == param::kHalfWidth.id && opt.halfWidth);
-        if (given) throw;
-        throw scene::SceneError(opt.scene + ": " + e.describe(e.param() + ":"));
-    } catch (const scene::SceneError&) {
-        throw;
-    } catch (const openvdb::Exception& e) {
-        OPENVDB_THROW(openvdb::RuntimeError, opt.scene + ": " + util::errorText(e));
-    }
-}
-
 /// One positioned write of a rank.
 struct Write
 {
@@ -248,21 +229,17 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
                              "ranks rasterize sparsely");
         }
         if (rank == 0 && !opt.output.empty()) io::checkOutputPath(opt.output);
-        if (opt.voxelSize) check(limits::kVoxelSize, *opt.voxelSize);
-        if (opt.halfWidth) check(limits::kHalfWidth, *opt.halfWidth);
-        sc = scene::loadScene(opt.scene, {opt.voxelSize, opt.halfWidth, std::nullopt, true});
+        sc = jobs::loadRasterScene(opt);
         if (sc.animated) {
             OPENVDB_THROW(openvdb::RuntimeError, opt.scene + " has keyed values (an animation): "
                           "ivdb-mpi rasterizes still scenes; plain ivdb writes its frames "
                           "(ivdb rasterize --frames)");
         }
-        settings = jobs::sceneSettings(sc, opt.scene, opt.voxelSize, opt.halfWidth);
-        settings.sampling = raster::Sampling::Sparse;
-        if (opt.distance) settings.distance = *opt.distance;
-        settings.interrupter = rank == 0 ? opt.interrupter : nullptr;
+        settings = jobs::rasterSettings(sc, opt);
+        if (rank != 0) settings.interrupter = nullptr;
         ownRaster = raster::isOwnRaster(sc.shape, settings);
         if (!ownRaster) {
-            asSceneErrors(opt, [&] { runs = std::make_unique<raster::RasterRuns>(sc.shape, settings); });
+            jobs::withSceneErrors(opt, [&] { runs = std::make_unique<raster::RasterRuns>(sc.shape, settings); });
         }
     });
     result.notes = sc.notes;
@@ -273,9 +250,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
         jobs::RasterizeResult one;
         collective(comm, [&] {
             if (rank == 0) {
-                jobs::RasterizeOptions o = opt;
-                o.interrupter = opt.interrupter;
-                one = jobs::rasterize(o);
+                one = jobs::rasterize(opt);
             }
         });
         std::uint64_t v[2] = {one.activeVoxels, one.fileBytes};
@@ -298,7 +273,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     const std::uint64_t first = n * std::uint64_t(rank) / std::uint64_t(size);
     const std::uint64_t count = n * std::uint64_t(rank + 1) / std::uint64_t(size) - first;
     raster::RunResult built;
-    collective(comm, [&] { asSceneErrors(opt, [&] { built = runs->build(first, count); }); });
+    collective(comm, [&] { jobs::withSceneErrors(opt, [&] { built = runs->build(first, count); }); });
     const double computeSeconds = secondsSince(start);
     const auto writeStart = Clock::now();
 
@@ -401,11 +376,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
         const openvdb::FloatGrid::Ptr skeleton = runs->skeleton(fates, anyInside != 0);
         fates = std::vector<raster::LeafFate>();
         if (activeVoxels == 0 || skeleton->tree().activeTileCount() == 0) {
-            std::ostringstream os;
-            os << opt.scene << ": the surface has no voxels at voxel size " << settings.voxelSize
-               << " (no zero crossing inside the bounds, or a shape smaller than a voxel): "
-               << "check the shape and bounds, or use a smaller voxel size; nothing was written";
-            OPENVDB_THROW(openvdb::RuntimeError, os.str());
+            jobs::throwNoVoxels(opt, settings);
         }
         jobs::stampRaster(*skeleton, opt, sc, settings);
         openvdb::MetaMap fileMeta;

@@ -63,6 +63,27 @@ struct RasterizeResult
 /// rasterized by rasterizeSequence().
 RasterizeResult rasterize(const RasterizeOptions& options);
 
+/// @brief The scene of @a options (at @a frame of a keyed scene; unset: not a frame of a
+/// sequence), its overrides checked first since mesh and vdb nodes are built at them;
+/// @a readInputs false only checks that those nodes' files exist.
+/// @throw ParamError for a bad override; scene::SceneError for a bad scene
+scene::Scene loadRasterScene(const RasterizeOptions& options,
+                             std::optional<double> frame = std::nullopt, bool readInputs = true);
+
+/// @brief The settings rasterize() rasterizes @a scene with: sceneSettings() with the options'
+/// sampling, distance mode and interrupter.
+raster::RasterSettings rasterSettings(const scene::Scene& scene, const RasterizeOptions& options);
+
+/// @brief Run @a step (rasterizing the scene of @a options) with rasterize()'s errors: a
+/// ParamError for a value the options did not give becomes the scene file's SceneError, named
+/// by its key; the shape's own problems (unbounded, too large) are the scene file's.
+void withSceneErrors(const RasterizeOptions& options, const std::function<void()>& step);
+
+/// @brief rasterize()'s error for a surface without voxels at the settings' voxel size.
+[[noreturn]] void throwNoVoxels(const RasterizeOptions& options,
+                                const raster::RasterSettings& settings,
+                                std::optional<int> frame = std::nullopt);
+
 /// @brief The metadata rasterize() gives its level set: ivdb's stamp (io::stampGrid, the scene
 /// file as source), the scene as rasterized (`ivdb_scene`: the overrides applied), the sampling
 /// (`ivdb_sampling`) and, for a frame of a sequence, `ivdb_frame`.
