@@ -39,6 +39,9 @@ Section "mpi" (ivdb-mpi, issue 16):
   * `ivdb rasterize` and `mpirun -np N ivdb-mpi rasterize` for N = 1..4 (--bind-to none, oversubscribed
     past the cores) of the radius-1600 sphere (400 with --quick): compute, write and total time
     and the largest peak memory of a rank against the one process, interleaved;
+  * `ivdb gradient` and `mpirun -np N ivdb-mpi gradient` of that sphere's file, and `ivdb csg
+    union` and `ivdb-mpi csg union` of it and a second sphere: read, compute, write and total
+    time and the largest peak memory of a rank, interleaved;
   * `ivdb plan` of a sphere of about 10^10 active voxels on 64 and 512 ranks.
 Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|sequence|mpi|all]
 [--reps N] [--quick]
@@ -226,8 +229,59 @@ def summary_seconds(line, word):
     return float(line.split(word + " ")[1].split(" s")[0])
 
 
+def interleaved(runs, reps, out, parse):
+    """Each of @runs (name: command) @reps times, interleaved, @out removed before each (no run
+    pays for unlinking the previous one's file): per name, the list of parse(name, stdout,
+    resource usage) of its runs."""
+    rows = {k: [] for k in runs}
+    for _ in range(reps):
+        for k, cmd in runs.items():
+            if os.path.exists(out):
+                os.remove(out)
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                    env=MPI_ENV)
+            _, status, usage = os.wait4(proc.pid, 0)
+            stdout, stderr = proc.stdout.read(), proc.stderr.read()
+            if os.waitstatus_to_exitcode(status) != 0:
+                sys.exit(f"failed: {' '.join(cmd)}\n{stderr}")
+            rows[k].append(parse(k, stdout, usage))
+    return rows
+
+
+def bench_mpi_file_op(title, args, out, reps, compute_word):
+    """`ivdb ARGS -o OUT` against `mpirun -np N ivdb-mpi ARGS -o OUT --json` for N = 1..4: a table
+    of read, compute, write and total time and the largest peak memory of a rank."""
+    runs = {"ivdb": [IVDB, *args, "-o", out]}
+    for n in range(1, 5):
+        runs[n] = ["mpirun", "--bind-to", "none", "--oversubscribe", "-np", str(n), IVDB_MPI,
+                   *args, "-o", out, "--json"]
+
+    def parse(k, stdout, usage):
+        if k == "ivdb":
+            line = stdout.splitlines()[0]
+            read, compute = summary_seconds(line, "read"), summary_seconds(line, compute_word)
+            total = summary_seconds(line, "total")
+            return (read, compute, total - read - compute, total, usage.ru_maxrss / 1024.0)
+        j = json.loads(stdout)
+        peak = max(r["peak_memory_bytes"] for r in j["per_rank"]) / 2**20
+        return (j["read_seconds"], j["compute_seconds"], j["write_seconds"], j["total_seconds"], peak)
+    rows = interleaved(runs, reps, out, parse)
+    med = {k: [statistics.median(x[i] for x in v) for i in range(5)] for k, v in rows.items()}
+    one = med["ivdb"]
+    print(f"\n{title}, medians of {reps} interleaved runs:\n")
+    print("| run | read | compute | write | total | largest peak memory of a rank | vs one process |")
+    print("|---|---|---|---|---|---|---|")
+    print(f"| ivdb (one process) | {one[0]:.2f} s | {one[1]:.2f} s | {one[2]:.2f} s | {one[3]:.2f} s | "
+          f"{one[4]:.0f} MB | 1.00x |")
+    for n in range(1, 5):
+        m = med[n]
+        print(f"| ivdb-mpi, {n} rank{'s' if n > 1 else ''} | {m[0]:.2f} s | {m[1]:.2f} s | {m[2]:.2f} s | "
+              f"{m[3]:.2f} s | {m[4]:.0f} MB | {m[4] / one[4]:.2f}x |")
+
+
 def bench_mpi(tmp, reps, quick):
-    """ivdb-mpi on 1 to 4 ranks against one ivdb process, and ivdb plan at 10^10 voxels."""
+    """ivdb-mpi on 1 to 4 ranks against one ivdb process (rasterize, gradient, csg), and ivdb plan
+    at 10^10 voxels."""
     radius = 400 if quick else 1600
     scene = sphere_scene(tmp, radius)
     out = os.path.join(tmp, "mpi.vdb")
@@ -237,26 +291,15 @@ def bench_mpi(tmp, reps, quick):
                    "rasterize", scene, "-o", out]
     for n in range(1, 5):
         runs[n].append("--json")
-    rows = {k: [] for k in runs}
-    for _ in range(reps):
-        for k, cmd in runs.items():
-            if os.path.exists(out):
-                os.remove(out)  # no run pays for unlinking the previous one's file
-            t0 = time.perf_counter()
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                    env=MPI_ENV)
-            _, status, usage = os.wait4(proc.pid, 0)
-            stdout, stderr = proc.stdout.read(), proc.stderr.read()
-            if os.waitstatus_to_exitcode(status) != 0:
-                sys.exit(f"failed: {' '.join(cmd)}\n{stderr}")
-            if k == "ivdb":
-                line = stdout.splitlines()[0]
-                compute, total = summary_seconds(line, "compute"), summary_seconds(line, "total")
-                rows[k].append((compute, total - compute, total, usage.ru_maxrss / 1024.0))
-            else:
-                j = json.loads(stdout)
-                peak = max(r["peak_memory_bytes"] for r in j["per_rank"]) / 2**20
-                rows[k].append((j["compute_seconds"], j["write_seconds"], j["total_seconds"], peak))
+    def parse(k, stdout, usage):
+        if k == "ivdb":
+            line = stdout.splitlines()[0]
+            compute, total = summary_seconds(line, "compute"), summary_seconds(line, "total")
+            return (compute, total - compute, total, usage.ru_maxrss / 1024.0)
+        j = json.loads(stdout)
+        peak = max(r["peak_memory_bytes"] for r in j["per_rank"]) / 2**20
+        return (j["compute_seconds"], j["write_seconds"], j["total_seconds"], peak)
+    rows = interleaved(runs, reps, out, parse)
     med = {k: [statistics.median(x[i] for x in v) for i in range(4)] for k, v in rows.items()}
     one = med["ivdb"]
     print(f"Radius-{radius} sphere, `mpirun --bind-to none --oversubscribe -np N ivdb-mpi rasterize` "
@@ -269,6 +312,24 @@ def bench_mpi(tmp, reps, quick):
         m = med[n]
         print(f"| ivdb-mpi, {n} rank{'s' if n > 1 else ''} | {m[0]:.2f} s | {m[1]:.2f} s | {m[2]:.2f} s | "
               f"{m[3]:.0f} MB | {m[3] / one[3]:.2f}x |")
+    # The gradient of that sphere's file: ivdb gradient against ivdb-mpi gradient, each rank
+    # reading its run of leaves and their neighbours.
+    source = os.path.join(tmp, "mpi_source.vdb")
+    subprocess.run([IVDB, "rasterize", scene, "-o", source, "-q"], check=True)
+    bench_mpi_file_op(f"`ivdb gradient` of that sphere's file against `mpirun ... -np N ivdb-mpi "
+                      f"gradient`", ["gradient", source], out, reps, "compute")
+    # Its union with a second sphere (radius 3/4, centred half a radius away), each rank
+    # combining its run of 128^3 nodes.
+    second = os.path.join(tmp, "mpi_second.json")
+    with open(second, "w") as f:
+        json.dump({"voxel_size": 1.0 / radius, "half_width": 3,
+                   "shape": {"type": "sphere", "center": [0.5, 0.2, 0.1], "radius": 0.75}}, f)
+    other = os.path.join(tmp, "mpi_second.vdb")
+    subprocess.run([IVDB, "rasterize", second, "-o", other, "-q"], check=True)
+    bench_mpi_file_op(f"`ivdb csg union` of that sphere and a second one (radius {3 * radius // 4} "
+                      f"voxels) against `mpirun ... -np N ivdb-mpi csg union`",
+                      ["csg", "union", source, other], out, reps, "combine")
+    os.remove(other)
     # Sizing a cluster: a sphere of about 10^10 active voxels (6 voxels across its surface).
     big = 11500
     print(f"\n`ivdb plan` of a radius-{big} sphere (voxel size 1/{big}):\n")

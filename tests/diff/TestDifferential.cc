@@ -526,6 +526,48 @@ TEST_F(TestDifferential, ThreadedEqualsSerial)
     expectIdentical(*t2, *s2, "k2");
 }
 
+TEST_F(TestDifferential, RunsOfLeavesMakeTheWholeGrid)
+{
+    // What ivdb-mpi's ranks compute: each operator on runs of the leaves (the others only read)
+    // gives, joined, the operator on the whole grid, bitwise.
+    auto csg = std::make_shared<implicit::Csg>(
+        implicit::Csg::Op::Union,
+        std::vector<implicit::Implicit::Ptr>{
+            std::make_shared<implicit::Sphere>(Vec3d(0.0), 0.5),
+            std::make_shared<implicit::Sphere>(Vec3d(0.5, 0.1, 0.0), 0.3)});
+    const auto phi = raster::rasterize(csg, settings(0.01));
+    std::vector<const openvdb::FloatTree::LeafNodeType*> all;
+    for (auto it = phi->tree().cbeginLeaf(); it; ++it) all.push_back(&*it);
+    // Joins the runs' output grids, which must each hold only their run's leaves.
+    auto joined = [&](auto&& op) {
+        auto out = op(nullptr);
+        out->clear();
+        const std::size_t runs = 5;
+        for (std::size_t r = 0; r < runs; ++r) {
+            const diff::LeafList only(all.begin() + std::ptrdiff_t(all.size() * r / runs),
+                                      all.begin() + std::ptrdiff_t(all.size() * (r + 1) / runs));
+            auto part = op(&only);
+            EXPECT_LE(part->tree().leafCount(), only.size());
+            for (auto it = part->tree().cbeginLeaf(); it; ++it) {
+                EXPECT_TRUE(std::find_if(only.begin(), only.end(), [&](const auto* l) {
+                    return l->origin() == it->origin(); }) != only.end());
+            }
+            out->tree().merge(part->tree());
+        }
+        return out;
+    };
+    for (int step : {1, 12}) {
+        expectIdentical(*joined([&](const diff::LeafList* o) { return diff::gradient(*phi, step, true, o); }),
+                        *diff::gradient(*phi, step), "gradient step " + std::to_string(step));
+    }
+    for (auto kind : {diff::Curvature::Mean, diff::Curvature::Gaussian, diff::Curvature::Laplacian}) {
+        expectIdentical(*joined([&](const diff::LeafList* o) { return diff::curvature(*phi, kind, true, o); }),
+                        *diff::curvature(*phi, kind), "curvature kind " + std::to_string(int(kind)));
+    }
+    expectIdentical(*joined([&](const diff::LeafList* o) { return diff::principalCurvatures(*phi, true, o).second; }),
+                    *diff::principalCurvatures(*phi).second, "k2");
+}
+
 TEST_F(TestDifferential, GradientStepAndGridProperties)
 {
     const SphereLevelSet s = makeSphere(25.0);

@@ -4,6 +4,8 @@
 // type), the same grids in the same order, with the same metadata, transforms, topology and
 // every value (voxels, inactive values and tiles) bit for bit.
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/io/VdbPieces.h>
+#include <ivdb/util/Params.h>
 
 #include "Grids.h"
 
@@ -19,6 +21,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 
 #include <tbb/global_control.h>
@@ -222,3 +225,68 @@ TEST_F(TestVdbReader, OurWriterRoundTrips)
 }
 
 } // namespace
+
+TEST_F(TestVdbReader, PartialGridReadsTheTopologyAndOnlyTheLeavesAskedFor)
+{
+    // What each ivdb-mpi rank reads: the level set's nodes, tiles and value masks, and the values
+    // of only the leaves it asks for, which equal a full read's.
+    auto fog = ivdb::test::sphere(0.5f, 0.05f, "density");
+    fog->setGridClass(openvdb::GRID_FOG_VOLUME);
+    auto ls = ivdb::test::sphere(1.0f, 0.01f, "surface");
+    ivdb::io::writeVdb(path("two.vdb"), {fog, ls});
+    const auto full = openvdb::gridPtrCast<openvdb::FloatGrid>(
+        ivdb::io::selectGrid(ivdb::io::readVdb(path("two.vdb")), path("two.vdb"), ""));
+    ivdb::io::PartialGrid part(path("two.vdb"), "");
+    const auto& g = *part.grid();
+    EXPECT_EQ(g.getName(), "surface");
+    EXPECT_EQ(g.background(), full->background());
+    std::vector<const openvdb::FloatTree::LeafNodeType*> want;
+    for (auto it = full->tree().cbeginLeaf(); it; ++it) want.push_back(&*it);
+    const auto& leaves = part.leaves();
+    ASSERT_EQ(leaves.size(), want.size());
+    for (const auto* leaf : leaves) EXPECT_TRUE(leaf->buffer().empty());
+    std::vector<std::uint64_t> every3rd;
+    for (std::uint64_t i = 0; i < leaves.size(); i += 3) every3rd.push_back(i);
+    part.load(every3rd);
+    part.checkValues(every3rd);
+    std::size_t loaded = 0;
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+        EXPECT_EQ(leaves[i]->origin(), want[i]->origin());
+        EXPECT_EQ(leaves[i]->getValueMask(), want[i]->getValueMask());
+        if (i % 3 != 0) {
+            EXPECT_TRUE(leaves[i]->buffer().empty()) << "leaf " << i << " was read";
+            continue;
+        }
+        ++loaded;
+        EXPECT_EQ(std::memcmp(leaves[i]->buffer().data(), want[i]->buffer().data(),
+                              sizeof(float) * openvdb::FloatTree::LeafNodeType::SIZE), 0) << i;
+    }
+    EXPECT_EQ(loaded, every3rd.size());
+    // The tiles (inside the sphere) are the full read's.
+    std::size_t tiles = 0;
+    for (auto it = full->tree().cbeginValueAll(); it; ++it) {
+        if (it.getLevel() == 0) continue;
+        ++tiles;
+        EXPECT_EQ(g.tree().getValue(it.getCoord()), *it);
+    }
+    EXPECT_GT(tiles, 0u);
+    // A grid by name; one that is not there, or not float values.
+    EXPECT_EQ(ivdb::io::PartialGrid(path("two.vdb"), "density").grid()->getName(), "density");
+    EXPECT_THROW(ivdb::io::PartialGrid(path("two.vdb"), "nope"), ivdb::ParamError);
+    auto vec = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+    vec->setName("v");
+    vec->tree().setValue(openvdb::Coord(1, 2, 3), openvdb::Vec3s(1.0f));
+    ivdb::io::writeVdb(path("vec.vdb"), {vec});
+    EXPECT_THROW(ivdb::io::PartialGrid(path("vec.vdb"), "v"), ivdb::ParamError);
+    EXPECT_THROW(ivdb::io::PartialGrid(path("missing.vdb"), ""), openvdb::IoError);
+    // A value that is not finite in a leaf read is found there.
+    auto bad = ivdb::test::sphere(0.5f, 0.05f, "surface");
+    const openvdb::Coord at = bad->tree().cbeginLeaf()->origin();
+    bad->tree().setValueOnly(at, std::numeric_limits<float>::quiet_NaN());
+    ivdb::io::writeVdb(path("nan.vdb"), {bad});
+    ivdb::io::PartialGrid damaged(path("nan.vdb"), "");
+    damaged.load({0, 1});
+    EXPECT_THROW(damaged.checkValues({0, 1}), openvdb::ValueError);
+    damaged.load({2});
+    EXPECT_NO_THROW(damaged.checkValues({2}));
+}

@@ -168,28 +168,19 @@ TEST_F(TestVdbWriter, CancelledTaskGroupWritesAndReadsNothing)
 
 namespace {
 
-/// @a grid but for its leaves, as raster::RasterRuns::skeleton gives it: an active tile of
-/// value 0 in a 128^3 node wherever @a grid has a leaf.
-openvdb::FloatGrid::Ptr skeletonOf(const openvdb::FloatGrid& grid)
-{
-    auto skeleton = grid.deepCopy();
-    std::vector<openvdb::Coord> leaves;
-    for (auto it = grid.tree().cbeginLeaf(); it; ++it) leaves.push_back(it->origin());
-    for (const auto& o : leaves) skeleton->tree().addTile(1, o, 0.0f, true);
-    return skeleton;
-}
-
 /// @a grid's leaves in @a runs runs of file order, each a grid of its own.
-std::vector<openvdb::FloatGrid::Ptr> leafRuns(const openvdb::FloatGrid& grid, int runs)
+template<typename GridT>
+std::vector<typename GridT::Ptr> leafRuns(const GridT& grid, int runs)
 {
-    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    std::vector<const LeafT*> leaves;
     for (auto it = grid.tree().cbeginLeaf(); it; ++it) leaves.push_back(&*it);
-    std::vector<openvdb::FloatGrid::Ptr> out;
+    std::vector<typename GridT::Ptr> out;
     for (int r = 0; r < runs; ++r) {
-        auto part = openvdb::FloatGrid::create(grid.background());
+        auto part = GridT::create(grid.background());
         part->setGridClass(grid.getGridClass());
         for (std::size_t i = leaves.size() * r / runs; i < leaves.size() * (r + 1) / runs; ++i) {
-            part->tree().addLeaf(new openvdb::FloatTree::LeafNodeType(*leaves[i]));
+            part->tree().addLeaf(new LeafT(*leaves[i]));
         }
         out.push_back(part);
     }
@@ -212,7 +203,7 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
     meta.insertMeta("creator", openvdb::StringMetadata("test"));
     for (const auto& grid : {big, small}) {
         ASSERT_GT(grid->tree().activeTileCount() + grid->tree().leafCount(), 0u);
-        const auto skeleton = skeletonOf(*grid);
+        const auto skeleton = ivdb::io::skeletonOf(*grid);
         // Every compression on the small grid; the large one (every kind of tile) with Blosc.
         const bool large = grid == big;
         for (auto c : {ivdb::io::Compression::Blosc, ivdb::io::Compression::Zip, ivdb::io::Compression::None}) {
@@ -244,17 +235,20 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
                         ivdb::io::vdbFileHead(*skeleton, all, body.size(), meta, options);
                     // The head's own parts and each run's masks, as the ranks write them: every
                     // byte of the head written exactly once.
-                    std::string head(fileHead.bytes.size(), '\0');
+                    ASSERT_EQ(fileHead.grids.size(), 1u) << what;
+                    const std::string& headBytes = fileHead.grids[0].bytes;
+                    EXPECT_EQ(fileHead.fileBytes, headBytes.size() + body.size()) << what;
+                    std::string head(headBytes.size(), '\0');
                     std::vector<int> writes(head.size(), 0);
                     const auto put = [&](std::uint64_t at, const char* data, std::uint64_t n) {
                         ASSERT_LE(at + n, head.size()) << what;
                         head.replace(at, n, data, n);
                         for (std::uint64_t i = at; i < at + n; ++i) ++writes[i];
                     };
-                    for (const auto& [at, n] : fileHead.nonMaskParts()) put(at, fileHead.bytes.data() + at, n);
+                    for (const auto& p : fileHead.nonMaskParts()) put(p.offset, p.data, p.size);
                     std::uint64_t leaf = 0;
                     for (const auto& run : parts) {
-                        for (const auto& [at, data] : fileHead.maskWrites(leaf, run.masks)) {
+                        for (const auto& [at, data] : fileHead.maskWrites(0, leaf, run.masks)) {
                             put(at, data.data(), data.size());
                         }
                         leaf += run.masks.size();
@@ -273,12 +267,87 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
         }
     }
     // A skeleton and entries that disagree are refused.
-    auto skeleton = skeletonOf(*small);
+    auto skeleton = ivdb::io::skeletonOf(*small);
     ivdb::io::LeafRun none;
     EXPECT_THROW(ivdb::io::vdbFileHead(*skeleton, none, 0, meta, {}), openvdb::ValueError);
     // Masks of leaves the head does not hold are refused.
     ivdb::io::LeafRun entries;
     for (const auto& part : leafRuns(*small, 1)) entries = ivdb::io::encodeLeafRun(*part, {});
     const ivdb::io::FileHead head = ivdb::io::vdbFileHead(*skeleton, entries, 0, meta, {});
-    EXPECT_THROW(head.maskWrites(1, entries.masks), openvdb::ValueError);
+    EXPECT_THROW(head.maskWrites(0, 1, entries.masks), openvdb::ValueError);
+    EXPECT_THROW(head.maskWrites(1, 0, entries.masks), openvdb::ValueError);
+}
+
+TEST_F(TestVdbWriter, PiecesMakeTheSameFileOfSeveralGrids)
+{
+    // What ivdb-mpi gradient writes: a vec3s grid, a float grid on its leaves and the input
+    // level set (with inside tiles), each from runs of its leaves, laid out one after another.
+    auto input = sphere(1.0f, 0.02f, "surface");
+    openvdb::tools::signedFloodFill(input->tree());
+    openvdb::tools::pruneLevelSet(input->tree());
+    const auto gradient = ivdb::diff::gradient(*input, 1);
+    const auto magnitude = ivdb::diff::magnitude(*gradient);
+    const openvdb::GridBase::ConstPtr grids[] = {gradient, magnitude, input};
+    // The skeletons the library makes from the input's topology alone, with each grid's metadata.
+    auto gradSkeleton = ivdb::io::leafSkeleton<openvdb::Vec3SGrid>(input->tree(), input->transform(),
+                                                                  openvdb::Vec3s(0.0f));
+    auto magSkeleton = ivdb::io::leafSkeleton<openvdb::FloatGrid>(input->tree(), input->transform(), 0.0f);
+    static_cast<openvdb::MetaMap&>(*gradSkeleton) = static_cast<const openvdb::MetaMap&>(*gradient);
+    static_cast<openvdb::MetaMap&>(*magSkeleton) = static_cast<const openvdb::MetaMap&>(*magnitude);
+    const openvdb::GridBase::ConstPtr skeletons[] = {gradSkeleton, magSkeleton, ivdb::io::skeletonOf(*input)};
+    openvdb::MetaMap meta;
+    meta.insertMeta("creator", openvdb::StringMetadata("test"));
+    for (auto c : {ivdb::io::Compression::Blosc, ivdb::io::Compression::Zip}) {
+        for (bool half : {false, true}) {
+            ivdb::io::WriteOptions options;
+            options.compression = c;
+            options.half = half;
+            const std::string what = ivdb::io::compressionNames()[std::size_t(c)] + (half ? ", half" : "");
+            ivdb::io::writeVdb(path("whole.vdb"), {gradient, magnitude, input}, meta, options);
+            // Per grid: its runs (3 of them) and their entries joined.
+            std::vector<std::vector<ivdb::io::LeafRun>> runs(3);
+            std::vector<ivdb::io::LeafRun> all(3);
+            std::vector<ivdb::io::HeadGrid> heads;
+            for (std::size_t g = 0; g < 3; ++g) {
+                grids[g]->apply<openvdb::TypeList<openvdb::FloatGrid, openvdb::Vec3SGrid>>([&](const auto& grid) {
+                    for (const auto& part : leafRuns(grid, 3)) {
+                        runs[g].push_back(ivdb::io::encodeLeafRun(*part, options));
+                        all[g].appendEntries(runs[g].back());
+                    }
+                });
+                std::uint64_t bytes = 0;
+                for (const auto& r : runs[g]) bytes += r.byteCount();
+                heads.push_back({skeletons[g], &all[g], bytes});
+            }
+            const ivdb::io::FileHead head = ivdb::io::vdbFileHead(heads, meta, options);
+            ASSERT_EQ(head.grids.size(), 3u);
+            std::string file(head.fileBytes, '\0');
+            std::vector<int> writes(file.size(), 0);
+            const auto put = [&](std::uint64_t at, const char* data, std::uint64_t n) {
+                ASSERT_LE(at + n, file.size()) << what;
+                file.replace(at, n, data, n);
+                for (std::uint64_t i = at; i < at + n; ++i) ++writes[i];
+            };
+            for (const auto& p : head.nonMaskParts()) put(p.offset, p.data, p.size);
+            for (std::size_t g = 0; g < 3; ++g) {
+                std::uint64_t leaf = 0, at = head.grids[g].buffersAt();
+                for (const auto& run : runs[g]) {
+                    for (const auto& [o, data] : head.maskWrites(g, leaf, run.masks)) put(o, data.data(), data.size());
+                    leaf += run.masks.size();
+                    for (const auto& piece : run.pieces) {
+                        put(at, piece.data(), piece.size());
+                        at += piece.size();
+                    }
+                }
+            }
+            EXPECT_EQ(std::count(writes.begin(), writes.end(), 1), std::ptrdiff_t(file.size())) << what;
+            std::string a = bytes(path("whole.vdb"));
+            ASSERT_EQ(a.size(), file.size()) << what;
+            a.replace(21, 36, 36, '-');
+            file.replace(21, 36, 36, '-');
+            std::size_t first = 0;
+            while (first < a.size() && a[first] == file[first]) ++first;
+            EXPECT_EQ(first, a.size()) << what << ": first difference at byte " << first;
+        }
+    }
 }

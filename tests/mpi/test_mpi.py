@@ -3,7 +3,8 @@
 `mpirun -np N ivdb-mpi rasterize` writes the file `ivdb rasterize` writes, byte for byte but the
 random UUID, for exact distances, true distances (CSG, quadrics, blends, a mesh), the bound mode,
 every compression and half floats; pyopenvdb reads it; bad input fails on every rank with one
-message and writes nothing.
+message and writes nothing. The same for `ivdb-mpi gradient`, `curvature` and `csg` against
+`ivdb gradient`, `curvature` and `csg`, on files ivdb and OpenVDB wrote.
 
 Run by ctest with IVDB_BINARY and IVDB_MPI_BINARY set; mpirun must be on PATH (openmpi-bin)."""
 
@@ -46,12 +47,8 @@ def masked(path):
     return bytes(b)
 
 
-class TestMpiRasterize(unittest.TestCase):
-    def setUp(self):
-        self.dir = tempfile.mkdtemp(prefix="ivdb-mpi-")
-
-    def tearDown(self):
-        shutil.rmtree(self.dir, ignore_errors=True)
+class MpiCase(unittest.TestCase):
+    """What the suites share: files in self.dir, and running a command under ivdb and ivdb-mpi."""
 
     def path(self, name):
         return os.path.join(self.dir, name)
@@ -60,15 +57,17 @@ class TestMpiRasterize(unittest.TestCase):
         left = [f for f in os.listdir(self.dir) if ".tmp-" in f]
         self.assertEqual(left, [], "temporary files left behind")
 
-    def same_as_ivdb(self, scene, *options, ranks=(1, 2, 3, 4)):
+    def same_bytes(self, command, source, *options, ranks=(1, 2, 3, 4)):
+        """`ivdb COMMAND SOURCE ...` and `ivdb-mpi COMMAND SOURCE ...` on each number of ranks
+        write the same file but for its UUID; returns the last ivdb-mpi file."""
         want = self.path("ivdb.vdb")
-        r = ivdb("rasterize", scene, "-o", want, "-q", *options)
+        r = ivdb(command, source, "-o", want, "-q", *options)
         self.assertEqual(r.returncode, 0, r.stderr)
         expected = masked(want)
         for n in ranks:
             out = self.path("mpi_%d.vdb" % n)
-            r = mpi(n, "rasterize", scene, "-o", out, *options)
-            what = "%s %s on %d ranks" % (os.path.basename(scene), " ".join(options), n)
+            r = mpi(n, command, source, "-o", out, *options)
+            what = "%s %s %s on %d ranks" % (command, os.path.basename(source), " ".join(options), n)
             self.assertEqual(r.returncode, 0, what + ": " + r.stderr)
             self.assertIn("on %d ranks" % n, r.stdout, what)
             got = masked(out)
@@ -80,6 +79,33 @@ class TestMpiRasterize(unittest.TestCase):
                 self.assertNotEqual(a.read()[UUID], b.read()[UUID], what + ": a new UUID")
         self.no_temporaries()
         return out
+
+    def errors(self, args, ranks=3):
+        """Run a failing command: every rank fails, rank 0 says why once, nothing is written and an
+        existing output is left as it was."""
+        out = self.path("kept.vdb")
+        with open(out, "wb") as f:
+            f.write(b"old contents")
+        r = mpi(ranks, *[a.replace("OUT", out) for a in args])
+        self.assertNotEqual(r.returncode, 0, r.stdout)
+        errors = [l for l in r.stderr.splitlines() if "error:" in l]
+        self.assertEqual(len(errors), 1, repr(r.stderr))
+        self.assertTrue(errors[0].startswith("ivdb-mpi: error: "), r.stderr)
+        with open(out, "rb") as f:
+            self.assertEqual(f.read(), b"old contents")
+        self.no_temporaries()
+        return errors[0]
+
+
+class TestMpiRasterize(MpiCase):
+    def setUp(self):
+        self.dir = tempfile.mkdtemp(prefix="ivdb-mpi-")
+
+    def tearDown(self):
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def same_as_ivdb(self, scene, *options, ranks=(1, 2, 3, 4)):
+        return self.same_bytes("rasterize", scene, *options, ranks=ranks)
 
     def test_exact_distances(self):
         # Inside tiles at every level: a sphere 300 voxels across.
@@ -202,22 +228,6 @@ class TestMpiRasterize(unittest.TestCase):
         with open(out, "rb") as f:
             self.assertEqual(f.read(), b"old contents")
 
-    def errors(self, args, ranks=3):
-        """Run a failing command: every rank fails, rank 0 says why once, nothing is written and an
-        existing output is left as it was."""
-        out = self.path("kept.vdb")
-        with open(out, "wb") as f:
-            f.write(b"old contents")
-        r = mpi(ranks, *[a.replace("OUT", out) for a in args])
-        self.assertNotEqual(r.returncode, 0, r.stdout)
-        errors = [l for l in r.stderr.splitlines() if "error:" in l]
-        self.assertEqual(len(errors), 1, repr(r.stderr))
-        self.assertTrue(errors[0].startswith("ivdb-mpi: error: "), r.stderr)
-        with open(out, "rb") as f:
-            self.assertEqual(f.read(), b"old contents")
-        self.no_temporaries()
-        return errors[0]
-
     def test_bad_input_fails_on_every_rank_and_writes_nothing(self):
         self.assertIn("missing.json", self.errors(["rasterize", self.path("missing.json"), "-o", "OUT"]))
         self.assertIn("--voxel-size", self.errors(["rasterize", data("sphere.json"), "-o", "OUT",
@@ -242,6 +252,182 @@ class TestMpiRasterize(unittest.TestCase):
         r = mpi(2, "rasterize", data("sphere.json"), "-o", self.path("nowhere/out.vdb"))
         self.assertNotEqual(r.returncode, 0)
         self.assertEqual(len([l for l in r.stderr.splitlines() if "error:" in l]), 1, r.stderr)
+
+
+class TestMpiDifferentiate(MpiCase):
+    """gradient and curvature: each rank reads its run of the input's leaves and their
+    neighbours, and the ranks write the file plain ivdb writes."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.dir = tempfile.mkdtemp(prefix="ivdb-mpi-diff-")
+        # A sphere 300 voxels across, with inside tiles at every level.
+        cls.sphere = os.path.join(cls.dir, "sphere.vdb")
+        r = ivdb("rasterize", data("sphere.json"), "-o", cls.sphere, "--voxel-size", "0.0066", "-q")
+        assert r.returncode == 0, r.stderr
+        cls.union = os.path.join(cls.dir, "union.vdb")
+        r = ivdb("rasterize", data("fig1_union.json"), "-o", cls.union, "-q", "--fog",
+                 "--compression", "zip", "--half")
+        assert r.returncode == 0, r.stderr
+        # Written by OpenVDB itself: a fog volume first, then a level set.
+        import pyopenvdb as vdb
+        fog = vdb.FloatGrid()
+        fog.name = "density"
+        fog.gridClass = vdb.GridClass.FOG_VOLUME
+        fog.fill((0, 0, 0), (20, 20, 20), 1.0)
+        ls = vdb.createLevelSetSphere(radius=0.7, center=(0.1, -0.2, 0.3), voxelSize=0.01, halfWidth=3.0)
+        ls.name = "ball"
+        cls.openvdb = os.path.join(cls.dir, "openvdb.vdb")
+        vdb.write(cls.openvdb, grids=[fog, ls])
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.dir, ignore_errors=True)
+
+    def test_gradient(self):
+        # Every grid the command writes: the vector grid, its magnitude and the input (with its
+        # tiles); a step that reaches two leaves; zip and half floats; OpenVDB's own file, with the
+        # level set second and by name.
+        self.same_bytes("gradient", self.sphere, "--magnitude", "--with-input")
+        self.same_bytes("gradient", self.union, "--step", "12", "--compression", "zip", "--half",
+                          ranks=(2, 3))
+        self.same_bytes("gradient", self.openvdb, "--with-input", ranks=(3,))
+        self.same_bytes("gradient", self.openvdb, "--grid", "ball", "--step", "20",
+                          "--compression", "none", ranks=(4,))
+
+    def test_curvature(self):
+        for method in ("mean", "gaussian", "principal", "laplacian"):
+            self.same_bytes("curvature", self.union, "--method", method, ranks=(3,))
+        self.same_bytes("curvature", self.sphere, "--method", "principal", "--with-input",
+                          ranks=(1, 4))
+
+    def test_each_rank_reads_its_run_and_a_halo(self):
+        # The leaves split evenly; each rank reads its own and only their neighbours (for the
+        # curvature's 3x3x3 stencil on a thin band: well under twice its own).
+        import json
+        r = mpi(4, "curvature", self.sphere, "-o", self.path("k.vdb"), "--json")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        j = json.loads(r.stdout)
+        runs = j["per_rank"]
+        self.assertEqual(sum(x["leaves"] for x in runs), j["leaves"])
+        self.assertLessEqual(max(x["leaves"] for x in runs) - min(x["leaves"] for x in runs), 1)
+        for x in runs:
+            self.assertGreaterEqual(x["leaves_read"], x["leaves"], x)
+            self.assertLess(x["leaves_read"], 2 * x["leaves"], x)
+        self.assertEqual(sum(x["active_voxels"] for x in runs), j["active_voxels"])
+        r = mpi(2, "gradient", self.sphere, "-o", self.path("g.vdb"), "--per-rank")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertEqual(len([l for l in r.stdout.splitlines() if l.strip().startswith("rank ")]), 2)
+
+    def test_bad_input_fails_on_every_rank_and_writes_nothing(self):
+        import pyopenvdb as vdb
+        self.assertIn("no such file", self.errors(["gradient", self.path("missing.vdb"), "-o", "OUT"]))
+        self.assertIn("--step", self.errors(["gradient", self.sphere, "-o", "OUT", "--step", "0"]))
+        self.assertIn("--grid", self.errors(["curvature", self.openvdb, "-o", "OUT", "--grid", "nope"]))
+        self.assertIn("fog volume", self.errors(["curvature", self.openvdb, "-o", "OUT", "--grid", "density"]))
+        # A value that is not finite in the last rank's leaves: that rank finds it, and says so.
+        grid = vdb.createLevelSetSphere(radius=0.5, voxelSize=0.02)
+        last = max(grid.citerOnValues(), key=lambda v: v.min)
+        acc = grid.getAccessor()
+        acc.setValueOn(last.min, float("nan"))
+        damaged = self.path("nan.vdb")
+        vdb.write(damaged, grids=[grid])
+        message = self.errors(["gradient", damaged, "-o", "OUT"])
+        self.assertIn("not finite", message)
+        self.assertIn("rank 2", message)
+        r = ivdb("gradient", damaged, "-o", self.path("plain.vdb"))
+        self.assertNotEqual(r.returncode, 0)
+        self.assertIn("not finite", r.stderr)
+        # Active tiles in a level set: plain ivdb takes it, ivdb-mpi says to.
+        tiles = vdb.createLevelSetSphere(radius=0.5, voxelSize=0.02)
+        tiles.fill((200, 200, 200), (400, 400, 400), 0.01, active=True)
+        tiled = self.path("tiles.vdb")
+        vdb.write(tiled, grids=[tiles])
+        self.assertIn("active tiles", self.errors(["curvature", tiled, "-o", "OUT"], ranks=2))
+        r = ivdb("curvature", tiled, "-o", self.path("plain.vdb"), "-q")
+        self.assertEqual(r.returncode, 0, r.stderr)
+
+
+class TestMpiCsg(MpiCase):
+    """csg: each rank reads and combines its run of the inputs' 128^3 nodes, and the ranks write
+    the file plain ivdb writes."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.dir = tempfile.mkdtemp(prefix="ivdb-mpi-csg-")
+        scenes = {"big": ('{"type": "sphere", "radius": 1}', ["--voxel-size", "0.004"]),
+                  "small": ('{"type": "sphere", "center": [0.8, 0.3, 0], "radius": 0.7}',
+                            ["--voxel-size", "0.004"]),
+                  "torus": ('{"type": "torus", "center": [0, 0, 0.5], "major_radius": 0.8, '
+                            '"minor_radius": 0.2}', ["--voxel-size", "0.004"]),
+                  # Another band (a wider background), normalized to the first input's.
+                  "wide": ('{"type": "sphere", "center": [-0.5, 0, 0.2], "radius": 0.6}',
+                           ["--voxel-size", "0.004", "--half-width", "5"]),
+                  "far": ('{"type": "sphere", "center": [5, 5, 5], "radius": 0.5}',
+                          ["--voxel-size", "0.004"]),
+                  "coarse": ('{"type": "sphere", "radius": 0.9}', ["--voxel-size", "0.01"])}
+        for name, (shape, options) in scenes.items():
+            scene = os.path.join(cls.dir, name + ".json")
+            with open(scene, "w") as f:
+                f.write('{"voxel_size": 0.004, "shape": %s}' % shape)
+            r = ivdb("rasterize", scene, "-o", os.path.join(cls.dir, name + ".vdb"), "-q", *options)
+            assert r.returncode == 0, r.stderr
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.dir, ignore_errors=True)
+
+    def csg(self, op, *names, options=(), ranks=(1, 2, 3, 4)):
+        inputs = [self.path(n + ".vdb") for n in names]
+        return self.same_bytes("csg", op, *inputs, *options, ranks=ranks)
+
+    def test_each_operation(self):
+        # A sphere with inside tiles in its 128^3 nodes, with another sphere and a torus.
+        self.csg("union", "big", "small")
+        self.csg("intersection", "big", "torus", ranks=(2, 3))
+        self.csg("difference", "big", "small", ranks=(3, 4))
+
+    def test_more_inputs_another_band_and_options(self):
+        # Folded from the left, with the pruning between steps; an input whose band (background)
+        # differs is narrowed to the first's, as plain ivdb does.
+        self.csg("union", "big", "small", "torus", ranks=(1, 3))
+        self.csg("difference", "big", "torus", "wide", ranks=(2, 4))
+        self.csg("intersection", "wide", "big", "small", options=("--compression", "zip", "--half"),
+                 ranks=(3,))
+
+    def test_an_empty_result_is_written_with_a_warning(self):
+        self.csg("intersection", "big", "far", ranks=(1, 3))
+        r = mpi(3, "csg", "intersection", self.path("big.vdb"), self.path("far.vdb"), "-o",
+                self.path("empty.vdb"))
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("ivdb-mpi: warning: the result has no surface", r.stderr)
+
+    def test_per_rank_report(self):
+        import json
+        r = mpi(3, "csg", "union", self.path("big.vdb"), self.path("small.vdb"), "-o",
+                self.path("u.vdb"), "--json")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        j = json.loads(r.stdout)
+        runs = j["per_rank"]
+        self.assertEqual(sum(x["nodes"] for x in runs), j["nodes"])
+        self.assertEqual(sum(x["leaves"] for x in runs), j["leaves"])
+        self.assertEqual(sum(x["active_voxels"] for x in runs), j["active_voxels"])
+        self.assertTrue(all(x["leaves_read"] > 0 for x in runs), runs)
+        self.assertEqual(j["file_bytes"], os.path.getsize(self.path("u.vdb")))
+
+    def test_bad_input_fails_on_every_rank_and_writes_nothing(self):
+        big, coarse = self.path("big.vdb"), self.path("coarse.vdb")
+        self.assertIn("at least two", self.errors(["csg", "union", big, "-o", "OUT"]))
+        self.assertIn("missing.vdb", self.errors(["csg", "union", big, self.path("missing.vdb"),
+                                                  "-o", "OUT"]))
+        # Another lattice: plain ivdb resamples it; ivdb-mpi says so.
+        message = self.errors(["csg", "union", big, coarse, "-o", "OUT"])
+        self.assertIn("coarse.vdb", message)
+        self.assertIn("resamples", message)
+        self.assertIn("--grid", self.errors(["csg", "union", big, big, "-o", "OUT", "--grid", "x"]))
+        self.assertIn("--fog", self.errors(["csg", "union", big, big, "-o", "OUT", "--fog"]))
+        self.assertIn("unknown command", self.errors(["blend", "union", big, big, "-o", "OUT",
+                                                      "-p", "10"]))
 
 
 if __name__ == "__main__":

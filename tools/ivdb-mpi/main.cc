@@ -6,6 +6,8 @@
 
 #include <ivdb/io/VdbFile.h>
 #include <ivdb/jobs/Rasterize.h>
+#include <ivdb/mpi/Combine.h>
+#include <ivdb/mpi/Differentiate.h>
 #include <ivdb/mpi/Rasterize.h>
 #include <ivdb/util/System.h>
 
@@ -121,6 +123,187 @@ void addRasterizeMpi(CLI::App& app, Action& action)
     cmd.onRun(action, [a]() { return runRasterize(*a); });
 }
 
+/// What the differential commands print: a summary line (or JSON) and, on request, each rank's.
+struct DiffPrint
+{
+    bool quiet = false, perRank = false, json = false;
+};
+
+void addDiffFlags(Command& cmd, DiffPrint& p)
+{
+    addQuietFlag(cmd, p.quiet);
+    cmd.flag("--per-rank", p.perRank, "Also print each rank's leaves, leaves read, voxels and "
+             "peak memory");
+    cmd.flag("--json", p.json, "Print the summary as JSON, with every rank's figures (bytes)");
+}
+
+void printDiff(const DiffPrint& p, const std::string& what, const std::string& input,
+               const std::string& output, const mpi::DifferentiateResult& r)
+{
+    if (worldRank() != 0) return;
+    if (p.json) {
+        nlohmann::json out{{"input", input}, {"grid", r.gridName}, {"output", output},
+                           {"ranks", r.ranks}, {"leaves", r.leaves},
+                           {"active_voxels", r.activeVoxels}, {"file_bytes", r.fileBytes},
+                           {"read_seconds", r.readSeconds}, {"compute_seconds", r.computeSeconds},
+                           {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds}};
+        nlohmann::json ranks = nlohmann::json::array();
+        for (int k = 0; k < r.ranks; ++k) {
+            const std::size_t i = std::size_t(k);
+            ranks.push_back({{"rank", k}, {"leaves", r.rankLeaves[i]},
+                             {"leaves_read", r.rankLeavesRead[i]},
+                             {"active_voxels", r.rankActiveVoxels[i]},
+                             {"peak_memory_bytes", r.rankPeakMemory[i]}});
+        }
+        out["per_rank"] = ranks;
+        std::printf("%s\n", out.dump(2).c_str());
+        return;
+    }
+    if (p.quiet) return;
+    std::uint64_t peak = 0;
+    for (std::uint64_t m : r.rankPeakMemory) peak = std::max(peak, m);
+    std::printf("%s: %s of '%s', %llu active voxels on %d ranks, file %s, peak memory per rank "
+                "up to %s, read %.3f s, compute %.3f s, write %.3f s, total %.3f s -> %s\n",
+                input.c_str(), what.c_str(), r.gridName.c_str(),
+                (unsigned long long)r.activeVoxels, r.ranks,
+                util::formatBytes(double(r.fileBytes)).c_str(),
+                util::formatBytes(double(peak)).c_str(), r.readSeconds, r.computeSeconds,
+                r.writeSeconds, r.totalSeconds, output.c_str());
+    if (p.perRank) {
+        for (int k = 0; k < r.ranks; ++k) {
+            const std::size_t i = std::size_t(k);
+            std::printf("  rank %d: %llu leaves (%llu read), %llu active voxels, peak memory %s\n",
+                        k, (unsigned long long)r.rankLeaves[i],
+                        (unsigned long long)r.rankLeavesRead[i],
+                        (unsigned long long)r.rankActiveVoxels[i],
+                        util::formatBytes(double(r.rankPeakMemory[i])).c_str());
+        }
+    }
+    std::fflush(stdout);
+}
+
+struct GradientArgs
+{
+    jobs::GradientOptions job;
+    std::string compression = "blosc";
+    DiffPrint print;
+};
+
+void addGradientMpi(CLI::App& app, Action& action)
+{
+    auto a = std::make_shared<GradientArgs>();
+    Command cmd(app, "gradient",
+        "Central-difference gradient of a level set over the MPI ranks (each reads its run of "
+        "leaves and their neighbours): the file ivdb gradient writes, every rank writing its part");
+    addGradientOptions(cmd, a->job, a->compression);
+    addDiffFlags(cmd, a->print);
+    cmd.onRun(action, [a]() {
+        a->job.write.compression = enumOf<io::Compression>(a->compression, io::compressionNames());
+        const mpi::DifferentiateResult r = mpi::gradient(MPI_COMM_WORLD, a->job);
+        printDiff(a->print, "gradient (step " + std::to_string(a->job.step) + ")", a->job.input,
+                  a->job.output, r);
+        return 0;
+    });
+}
+
+struct CurvatureArgs
+{
+    jobs::CurvatureOptions job;
+    std::string compression = "blosc", method = "mean";
+    DiffPrint print;
+};
+
+void addCurvatureMpi(CLI::App& app, Action& action)
+{
+    auto a = std::make_shared<CurvatureArgs>();
+    Command cmd(app, "curvature",
+        "Curvature of a level set over the MPI ranks (each reads its run of leaves and their "
+        "neighbours): the file ivdb curvature writes (same --method conventions), every rank "
+        "writing its part");
+    addCurvatureOptions(cmd, a->job, a->method, a->compression);
+    addDiffFlags(cmd, a->print);
+    cmd.onRun(action, [a]() {
+        a->job.write.compression = enumOf<io::Compression>(a->compression, io::compressionNames());
+        a->job.method = enumOf<jobs::CurvatureMethod>(a->method, jobs::curvatureMethodNames());
+        const mpi::DifferentiateResult r = mpi::curvature(MPI_COMM_WORLD, a->job);
+        printDiff(a->print, a->method + " curvature", a->job.input, a->job.output, r);
+        return 0;
+    });
+}
+
+struct CsgArgs
+{
+    jobs::CombineOptions job;
+    std::string compression = "blosc", op;
+    bool quiet = false, perRank = false, json = false;
+};
+
+void printCsg(const CsgArgs& a, const mpi::CsgResult& r)
+{
+    if (worldRank() != 0) return;
+    printNotes({}, r.warnings);
+    if (a.json) {
+        nlohmann::json out{{"inputs", a.job.inputs}, {"output", a.job.output}, {"op", a.op},
+                           {"ranks", r.ranks}, {"nodes", r.nodes}, {"leaves", r.leaves},
+                           {"active_voxels", r.activeVoxels}, {"file_bytes", r.fileBytes},
+                           {"read_seconds", r.readSeconds}, {"compute_seconds", r.computeSeconds},
+                           {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds}};
+        nlohmann::json ranks = nlohmann::json::array();
+        for (int k = 0; k < r.ranks; ++k) {
+            const std::size_t i = std::size_t(k);
+            ranks.push_back({{"rank", k}, {"nodes", r.rankNodes[i]},
+                             {"leaves_read", r.rankLeavesRead[i]}, {"leaves", r.rankLeaves[i]},
+                             {"active_voxels", r.rankActiveVoxels[i]},
+                             {"peak_memory_bytes", r.rankPeakMemory[i]}});
+        }
+        out["per_rank"] = ranks;
+        std::printf("%s\n", out.dump(2).c_str());
+        return;
+    }
+    if (a.quiet) return;
+    std::uint64_t peak = 0;
+    for (std::uint64_t m : r.rankPeakMemory) peak = std::max(peak, m);
+    std::printf("csg %s of %zu level sets: %llu active voxels on %d ranks, file %s, peak memory "
+                "per rank up to %s, read %.3f s, combine %.3f s, write %.3f s, total %.3f s -> "
+                "%s\n",
+                a.op.c_str(), a.job.inputs.size(), (unsigned long long)r.activeVoxels, r.ranks,
+                util::formatBytes(double(r.fileBytes)).c_str(),
+                util::formatBytes(double(peak)).c_str(), r.readSeconds, r.computeSeconds,
+                r.writeSeconds, r.totalSeconds, a.job.output.c_str());
+    if (a.perRank) {
+        for (int k = 0; k < r.ranks; ++k) {
+            const std::size_t i = std::size_t(k);
+            std::printf("  rank %d: %llu nodes of 128^3, %llu leaves read, %llu leaves, %llu "
+                        "active voxels, peak memory %s\n",
+                        k, (unsigned long long)r.rankNodes[i],
+                        (unsigned long long)r.rankLeavesRead[i], (unsigned long long)r.rankLeaves[i],
+                        (unsigned long long)r.rankActiveVoxels[i],
+                        util::formatBytes(double(r.rankPeakMemory[i])).c_str());
+        }
+    }
+    std::fflush(stdout);
+}
+
+void addCsgMpi(CLI::App& app, Action& action)
+{
+    auto a = std::make_shared<CsgArgs>();
+    Command cmd(app, "csg",
+        "Sharp CSG of level sets over the MPI ranks (each reads and combines its run of 128^3 "
+        "nodes): the file ivdb csg writes, every rank writing its part. The inputs must share "
+        "one transform (ivdb csg resamples them)");
+    addCombineInputs(cmd, a->job, a->op, a->compression);
+    addQuietFlag(cmd, a->quiet);
+    cmd.flag("--per-rank", a->perRank, "Also print each rank's nodes, leaves read, leaves, voxels "
+             "and peak memory");
+    cmd.flag("--json", a->json, "Print the summary as JSON, with every rank's figures (bytes)");
+    cmd.onRun(action, [a]() {
+        a->job.write.compression = enumOf<io::Compression>(a->compression, io::compressionNames());
+        a->job.op = *implicit::csgOpFromString(a->op);
+        printCsg(*a, mpi::csg(MPI_COMM_WORLD, a->job));
+        return 0;
+    });
+}
+
 } // namespace
 
 } // namespace ivdb::cli
@@ -144,11 +327,14 @@ int main(int argc, char** argv)
         }
         ivdb::cli::Program program;
         program.name = "ivdb-mpi";
-        program.description = "ivdb-mpi: ivdb's rasterizing over MPI ranks, into one .vdb file "
-                              "(run as mpirun -np N ivdb-mpi COMMAND ...)";
-        program.commandList = "rasterize";
+        program.description = "ivdb-mpi: ivdb's rasterizing, gradient, curvature and CSG over MPI "
+                              "ranks, into one .vdb file (run as mpirun -np N ivdb-mpi COMMAND ...)";
+        program.commandList = "rasterize, gradient, curvature, csg";
         program.addCommands = [](CLI::App& app, ivdb::cli::Action& action) {
             ivdb::cli::addRasterizeMpi(app, action);
+            ivdb::cli::addGradientMpi(app, action);
+            ivdb::cli::addCurvatureMpi(app, action);
+            ivdb::cli::addCsgMpi(app, action);
         };
         program.printsErrors = [rank] { return rank == 0; };
         program.handlesSignals = rank == 0;

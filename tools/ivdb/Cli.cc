@@ -4,6 +4,8 @@
 #include <ivdb/Version.h>
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/jobs/Combine.h>
+#include <ivdb/jobs/Differentiate.h>
 #include <ivdb/jobs/Rasterize.h>
 #include <ivdb/util/System.h>
 
@@ -149,10 +151,21 @@ void setInterruptedNote(const std::string& note)
     gInterruptedMessage = next;
 }
 
+namespace {
+
+/// The running program's name, for the lines it prints ("ivdb", "ivdb-mpi"); run() sets it.
+std::string& programName()
+{
+    static std::string name = "ivdb";
+    return name;
+}
+
+} // namespace
+
 void printNotes(const std::vector<std::string>& notes, const std::vector<std::string>& warnings)
 {
-    for (const auto& n : notes) std::cerr << "ivdb: note: " << n << std::endl;
-    for (const auto& w : warnings) std::cerr << "ivdb: warning: " << w << std::endl;
+    for (const auto& n : notes) std::cerr << programName() << ": note: " << n << std::endl;
+    for (const auto& w : warnings) std::cerr << programName() << ": warning: " << w << std::endl;
 }
 
 void addFogFlag(Command& cmd, bool& fog)
@@ -190,6 +203,47 @@ void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& d
         ->check(CLI::IsMember({"exact", "bound"}));
 }
 
+void addGradientOptions(Command& cmd, jobs::GradientOptions& job, std::string& compression)
+{
+    cmd.add("input", job.input, "Input .vdb file")->required();
+    cmd.add("-o,--output", job.output, "Output .vdb file (written atomically)")->required();
+    cmd.add("--step", job.step,
+            "Difference step K in voxels: (phi(x+K) - phi(x-K)) / (2 K dx); in [1, 20]",
+            &param::kStep)
+        ->capture_default_str();
+    cmd.add("--grid", job.grid, "Input grid name (default: the first level set)", &param::kGrid);
+    cmd.flag("--magnitude", job.magnitude, "Also write 'gradient_magnitude' (|gradient|)");
+    cmd.flag("--with-input", job.withInput, "Also copy the input grid into the output file");
+    addWriteOptions(cmd, compression, job.write.half);
+}
+
+void addCurvatureOptions(Command& cmd, jobs::CurvatureOptions& job, std::string& method,
+                         std::string& compression)
+{
+    cmd.add("input", job.input, "Input .vdb file")->required();
+    cmd.add("-o,--output", job.output, "Output .vdb file (written atomically)")->required();
+    cmd.add("--method", method, "mean | gaussian | principal | laplacian", &param::kMethod)
+        ->check(CLI::IsMember(jobs::curvatureMethodNames()))
+        ->capture_default_str();
+    cmd.add("--grid", job.grid, "Input grid name (default: the first level set)", &param::kGrid);
+    cmd.flag("--with-input", job.withInput, "Also copy the input grid into the output file");
+    addWriteOptions(cmd, compression, job.write.half);
+}
+
+void addCombineInputs(Command& cmd, jobs::CombineOptions& job, std::string& op,
+                      std::string& compression)
+{
+    cmd.add("op", op, "union | intersection | difference")
+        ->required()
+        ->check(CLI::IsMember(implicit::csgOpNames()));
+    cmd.add("inputs", job.inputs, "Two or more input .vdb files")->required();
+    cmd.name(param::kInputs, cmd.app().get_name() + " " + "inputs");
+    cmd.add("-o,--output", job.output, "Output .vdb file (written atomically)")->required();
+    cmd.add("--grid", job.grid, "Grid name in every input (default: each file's first level set)",
+            &param::kGrid);
+    addWriteOptions(cmd, compression, job.write.half);
+}
+
 void addQuietFlag(Command& cmd, bool& quiet)
 {
     cmd.flag("-q,--quiet", quiet, "Do not print the summary line");
@@ -221,6 +275,7 @@ std::pair<double, double> parseRange(const std::string& text)
 
 int run(int argc, char** argv, const Program& program)
 {
+    programName() = program.name;
     const std::string error = program.name + ": error: ";
     try {
         if (program.handlesSignals) installSignalHandlers();

@@ -19,6 +19,9 @@
 
 namespace ivdb::jobs {
 struct RasterizeOptions;
+struct GradientOptions;
+struct CurvatureOptions;
+struct CombineOptions;
 }
 
 namespace ivdb::cli {
@@ -142,6 +145,20 @@ void addWriteOptions(Command& cmd, std::string& compression, bool& half);
 /// (`ivdb rasterize`, `ivdb-mpi rasterize`), bound to @a job and @a distance ("exact" or
 /// "bound"; empty: the scene's).
 void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& distance);
+
+/// @brief The input, output and options of `gradient` (ivdb and ivdb-mpi), bound to @a job and
+/// @a compression.
+void addGradientOptions(Command& cmd, jobs::GradientOptions& job, std::string& compression);
+
+/// @brief The input, output and options of `curvature` (ivdb and ivdb-mpi), bound to @a job,
+/// @a method and @a compression.
+void addCurvatureOptions(Command& cmd, jobs::CurvatureOptions& job, std::string& method,
+                         std::string& compression);
+
+/// @brief The operation, inputs, output, grid and write options of `csg` and `blend` (ivdb and
+/// ivdb-mpi), bound to @a job, @a op and @a compression.
+void addCombineInputs(Command& cmd, jobs::CombineOptions& job, std::string& op,
+                      std::string& compression);
 
 /// @brief The -q flag of the commands that print a summary line.
 void addQuietFlag(Command& cmd, bool& quiet);

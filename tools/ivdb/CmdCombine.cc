@@ -53,15 +53,7 @@ int runCombine(CombineArgs& a, bool blend)
 std::shared_ptr<CombineArgs> addCombineOptions(Command& cmd)
 {
     auto a = std::make_shared<CombineArgs>();
-    cmd.add("op", a->op, "union | intersection | difference")
-        ->required()
-        ->check(CLI::IsMember(implicit::csgOpNames()));
-    cmd.add("inputs", a->job.inputs, "Two or more input .vdb files")->required();
-    cmd.name(param::kInputs, cmd.app().get_name() + " " + "inputs");
-    cmd.add("-o,--output", a->job.output, "Output .vdb file (written atomically)")->required();
-    cmd.add("--grid", a->job.grid, "Grid name in every input (default: each file's first level set)",
-            &param::kGrid);
-    addWriteOptions(cmd, a->compression, a->job.write.half);
+    addCombineInputs(cmd, a->job, a->op, a->compression);
     addFogFlag(cmd, a->job.fog);
     addQuietFlag(cmd, a->quiet);
     return a;

@@ -44,14 +44,7 @@ void addCurvature(CLI::App& app, Action& action)
         "a sphere, as OpenVDB's meanCurvature); gaussian = k1 k2 (1/r^2); principal = k1 >= k2 "
         "(1/r each); laplacian = the Laplacian of phi, an approximation (2/r on a sphere's "
         "distance field)");
-    cmd.add("input", a->job.input, "Input .vdb file")->required();
-    cmd.add("-o,--output", a->job.output, "Output .vdb file (written atomically)")->required();
-    cmd.add("--method", a->method, "mean | gaussian | principal | laplacian", &param::kMethod)
-        ->check(CLI::IsMember(jobs::curvatureMethodNames()))
-        ->capture_default_str();
-    cmd.add("--grid", a->job.grid, "Input grid name (default: the first level set)", &param::kGrid);
-    cmd.flag("--with-input", a->job.withInput, "Also copy the input grid into the output file");
-    addWriteOptions(cmd, a->compression, a->job.write.half);
+    addCurvatureOptions(cmd, a->job, a->method, a->compression);
     addQuietFlag(cmd, a->quiet);
     cmd.onRun(action, [a]() { return runCurvature(*a); });
 }

@@ -39,16 +39,7 @@ void addGradient(CLI::App& app, Action& action)
     Command cmd(app, "gradient",
         "Central-difference gradient of a level set: a covariant world-space Vec3SGrid "
         "'gradient' on the input's band");
-    cmd.add("input", a->job.input, "Input .vdb file")->required();
-    cmd.add("-o,--output", a->job.output, "Output .vdb file (written atomically)")->required();
-    cmd.add("--step", a->job.step,
-            "Difference step K in voxels: (phi(x+K) - phi(x-K)) / (2 K dx); in [1, 20]",
-            &param::kStep)
-        ->capture_default_str();
-    cmd.add("--grid", a->job.grid, "Input grid name (default: the first level set)", &param::kGrid);
-    cmd.flag("--magnitude", a->job.magnitude, "Also write 'gradient_magnitude' (|gradient|)");
-    cmd.flag("--with-input", a->job.withInput, "Also copy the input grid into the output file");
-    addWriteOptions(cmd, a->compression, a->job.write.half);
+    addGradientOptions(cmd, a->job, a->compression);
     addQuietFlag(cmd, a->quiet);
     cmd.onRun(action, [a]() { return runGradient(*a); });
 }

@@ -8,10 +8,13 @@
 
 #include <openvdb/tree/LeafManager.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <sstream>
 #include <vector>
 
@@ -98,12 +101,16 @@ void runMaybeSerial(bool threaded, Fn&& fn)
 template<typename OutGridT, typename Kernel>
 typename OutGridT::Ptr stencilMap(const openvdb::FloatGrid& phi, int pad, bool axesOnly,
                                   const typename OutGridT::ValueType& background, bool threaded,
-                                  const Kernel& kernel)
+                                  const LeafList* only, const Kernel& kernel)
 {
     using OutTreeT = typename OutGridT::TreeType;
     using OutLeafT = typename OutTreeT::LeafNodeType;
     const FloatTree* src = &phi.tree();
     FloatTree::Ptr voxelized;
+    if (only && src->hasActiveTiles()) {
+        OPENVDB_THROW(openvdb::ValueError, "a level set with active tiles is computed whole, not "
+                      "by runs of leaves");
+    }
     if (src->hasActiveTiles()) {
         voxelized = std::make_shared<FloatTree>(*src);
         voxelized->voxelizeActiveTiles();
@@ -112,21 +119,28 @@ typename OutGridT::Ptr stencilMap(const openvdb::FloatGrid& phi, int pad, bool a
     auto out = OutGridT::create(background);
     out->setTransform(phi.transform().copy());
     runMaybeSerial(threaded, [&]() {
-        openvdb::tree::LeafManager<const FloatTree> leaves(*src);
-        std::vector<OutLeafT*> built(leaves.leafCount(), nullptr);
-        leaves.foreach([&](const LeafT& in, size_t idx) {
-            if (in.isEmpty()) return;
+        std::unique_ptr<openvdb::tree::LeafManager<const FloatTree>> manager;
+        if (!only) manager = std::make_unique<openvdb::tree::LeafManager<const FloatTree>>(*src);
+        const std::size_t count = only ? only->size() : manager->leafCount();
+        std::vector<OutLeafT*> built(count, nullptr);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            // One accessor and block per task: each gather overwrites what the stencil reads.
             openvdb::tree::ValueAccessor<const FloatTree> acc(*src);
             PaddedLeaf block(pad, axesOnly);
-            block.gather(acc, in.origin());
-            auto* leaf = new OutLeafT(in.origin(), background);
-            leaf->setValueMask(in.getValueMask());
-            auto* buf = leaf->buffer().data();
-            for (auto it = in.getValueMask().beginOn(); it; ++it) {
-                const openvdb::Index n = it.pos();
-                buf[n] = kernel(block, int(n >> 6), int((n >> 3) & 7), int(n & 7));
+            for (std::size_t idx = r.begin(); idx != r.end(); ++idx) {
+                const LeafT& in = only ? *(*only)[idx] : manager->leaf(idx);
+                if (in.isEmpty()) continue;
+                block.gather(acc, in.origin());
+                auto* leaf = new OutLeafT(in.origin(), background);
+                leaf->setValueMask(in.getValueMask());
+                auto* buf = leaf->buffer().data();
+                for (auto it = in.getValueMask().beginOn(); it; ++it) {
+                    const openvdb::Index n = it.pos();
+                    buf[n] = kernel(block, int(n >> 6), int((n >> 3) & 7), int(n & 7));
+                }
+                built[idx] = leaf;
             }
-            built[idx] = leaf;
         });
         openvdb::tree::ValueAccessor<OutTreeT> acc(out->tree());
         for (OutLeafT* leaf : built) {
@@ -189,12 +203,12 @@ struct Derivatives
 
 } // namespace
 
-openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step, bool threaded)
+openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step, bool threaded, const LeafList* only)
 {
     check(limits::kStep, step);
     const double dx = levelset::uniformVoxelSize(phi);
     const float inv = float(1.0 / (2.0 * step * dx));
-    auto out = stencilMap<openvdb::Vec3SGrid>(phi, step, /*axesOnly=*/true, openvdb::Vec3s(0.0f), threaded,
+    auto out = stencilMap<openvdb::Vec3SGrid>(phi, step, /*axesOnly=*/true, openvdb::Vec3s(0.0f), threaded, only,
         [step, inv](const PaddedLeaf& b, int i, int j, int k) {
             return openvdb::Vec3s((b(i + step, j, k) - b(i - step, j, k)) * inv,
                                   (b(i, j + step, k) - b(i, j - step, k)) * inv,
@@ -221,14 +235,15 @@ openvdb::FloatGrid::Ptr magnitude(const openvdb::Vec3SGrid& gradient)
     return out;
 }
 
-openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind, bool threaded)
+openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind, bool threaded,
+                                  const LeafList* only)
 {
     const double dx = levelset::uniformVoxelSize(phi);
     openvdb::FloatGrid::Ptr out;
     switch (kind) {
     case Curvature::Mean: {
         const float inv2dx = float(1.0 / (2.0 * dx));
-        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
+        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded, only,
             [inv2dx](const PaddedLeaf& b, int i, int j, int k) {
                 float alpha, beta;
                 if (!Derivatives(b, i, j, k).mean(alpha, beta)) return 0.0f;
@@ -238,7 +253,7 @@ openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
     }
     case Curvature::Gaussian: {
         const double invdx2 = 1.0 / (dx * dx);
-        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
+        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded, only,
             [invdx2](const PaddedLeaf& b, int i, int j, int k) {
                 double g;
                 return Derivatives(b, i, j, k).gaussian(g) ? float(g * invdx2) : 0.0f;
@@ -247,7 +262,7 @@ openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
     }
     case Curvature::Laplacian: {
         const float invdx2 = float(1.0 / (dx * dx));
-        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
+        out = stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded, only,
             [invdx2](const PaddedLeaf& b, int i, int j, int k) {
                 const float c = b(i, j, k);
                 return (b(i + 1, j, k) + b(i - 1, j, k) + b(i, j + 1, k) + b(i, j - 1, k) +
@@ -261,12 +276,12 @@ openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
 }
 
 std::pair<openvdb::FloatGrid::Ptr, openvdb::FloatGrid::Ptr>
-principalCurvatures(const openvdb::FloatGrid& phi, bool threaded)
+principalCurvatures(const openvdb::FloatGrid& phi, bool threaded, const LeafList* only)
 {
     const double invdx = 1.0 / levelset::uniformVoxelSize(phi);
     // k = H +/- sqrt(H^2 - K), from the same differences as the mean and Gaussian curvatures.
     auto principal = [&](double sign) {
-        return stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded,
+        return stencilMap<openvdb::FloatGrid>(phi, 1, /*axesOnly=*/false, 0.0f, threaded, only,
             [invdx, sign](const PaddedLeaf& b, int i, int j, int k) {
                 const Derivatives d(b, i, j, k);
                 float alpha, beta;

@@ -10,11 +10,13 @@
 // every ivdb command touches every voxel (the value check alone does), so the whole grid is
 // read anyway, and reading it here in one parallel pass is faster (docs/performance.md).
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/io/VdbPieces.h>
 
 #include "Cancel.h"
 #include "FileMapping.h"
 #include "Layout.h"
 
+#include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/io/Compression.h>
@@ -27,6 +29,9 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -156,11 +161,10 @@ void decodeLeaf(LeafT& leaf, const char* p, const char* end, std::uint32_t compr
 /// Every leaf's voxel data, in parallel: each task reads a run of consecutive leaves through
 /// its own stream, so no state is shared but the (read-only) mapping.
 template<typename GridT>
-void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
-                const StreamState& state)
+std::vector<typename GridT::TreeType::LeafNodeType*>
+leavesInFileOrder(GridT& grid, const GridLayout& layout)
 {
-    using LeafT = typename GridT::TreeType::LeafNodeType;
-    std::vector<LeafT*> leaves;
+    std::vector<typename GridT::TreeType::LeafNodeType*> leaves;
     leaves.reserve(layout.leaves.size());
     grid.tree().getNodes(leaves);
     if (leaves.size() != layout.leaves.size()) {
@@ -168,6 +172,27 @@ void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
                       std::to_string(leaves.size()) + " leaves where its voxel data has " +
                       std::to_string(layout.leaves.size()));
     }
+    return leaves;
+}
+
+/// The voxel data of the leaves @a only picks (indices in file order; null: every leaf).
+template<typename GridT>
+void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
+                const StreamState& state, const std::vector<std::uint64_t>* only = nullptr)
+{
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    const std::vector<LeafT*> all = leavesInFileOrder(grid, layout);
+    std::vector<LeafT*> picked;
+    std::vector<std::uint64_t> offsets;
+    if (only) {
+        for (std::uint64_t i : *only) {
+            if (i >= all.size()) OPENVDB_THROW(openvdb::ValueError, "no leaf " + std::to_string(i));
+            picked.push_back(all[i]);
+            offsets.push_back(layout.leaves[i]);
+        }
+    }
+    const std::vector<LeafT*>& leaves = only ? picked : all;
+    const std::vector<std::uint64_t>& at = only ? offsets : layout.leaves;
     namespace vio = openvdb::io;
     const bool half = grid.saveFloatAsHalf();
     const auto& background = grid.tree().background();
@@ -178,7 +203,7 @@ void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
                       [&](const tbb::blocked_range<std::size_t>& r) {
         if (direct) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                decodeLeaf(*leaves[i], file.data() + layout.leaves[i], file.data() + file.size(),
+                decodeLeaf(*leaves[i], file.data() + at[i], file.data() + file.size(),
                            state.compression, background);
             }
             return;
@@ -187,7 +212,7 @@ void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
         state.tag(is);
         vio::setGridBackgroundValuePtr(is, &background);
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            is.seekg(std::streamoff(layout.leaves[i]));
+            is.seekg(std::streamoff(at[i]));
             leaves[i]->readBuffers(is, half);
             if (!is) {
                 OPENVDB_THROW(openvdb::IoError, "grid '" + grid.getName() + "' ends inside the "
@@ -199,9 +224,10 @@ void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
 }
 
 /// One grid from its record on, as OpenVDB's Archive reads it (compression flags, metadata
-/// without the delayed-load table, transform, topology), then its voxel data in parallel.
-openvdb::GridBase::Ptr readGridParallel(const GridLayout& layout, const FileMapping& file,
-                                        StreamState state)
+/// without the delayed-load table, transform and, with @a topology, the topology, its leaves
+/// holding no values yet); @a state takes the grid's compression flags.
+openvdb::GridBase::Ptr readGridHead(const GridLayout& layout, const FileMapping& file,
+                                    StreamState& state, bool topology)
 {
     std::string type = layout.type;
     const std::string halfSuffix = "_HalfFloat";
@@ -225,18 +251,28 @@ openvdb::GridBase::Ptr readGridParallel(const GridLayout& layout, const FileMapp
         grid->removeMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD);
     }
     grid->readTransform(is);
-    if (layout.parent.empty()) {
+    if (topology && layout.parent.empty()) {
         grid->readTopology(is);
         if (!is) OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' is truncated");
+    }
+    if (!is) OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' is truncated");
+    return grid;
+}
+
+/// One grid from its record on, then its voxel data in parallel.
+openvdb::GridBase::Ptr readGridParallel(const GridLayout& layout, const FileMapping& file,
+                                        StreamState state)
+{
+    openvdb::GridBase::Ptr grid = readGridHead(layout, file, state, true);
+    if (layout.parent.empty()) {
         const bool known = grid->apply<WalkedGrids>([&](auto& g) {
             readLeaves(g, layout, file, state);
         });
         if (!known) {
             OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' has type '" +
-                          type + "', which the parallel reader does not read");
+                          layout.type + "', which the parallel reader does not read");
         }
     }
-    if (!is) OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' is truncated");
     return grid;
 }
 
@@ -310,9 +346,8 @@ openvdb::GridPtrVec readWithOpenVdb(const std::string& path)
     return grids ? *grids : openvdb::GridPtrVec();
 }
 
-} // namespace
-
-openvdb::GridPtrVec readVdb(const std::string& path)
+/// Refuse a path that is not a readable regular file, naming it.
+void checkReadable(const std::string& path)
 {
     detail::throwIfCancelled(path + ": reading");
     std::error_code ec;
@@ -322,6 +357,13 @@ openvdb::GridPtrVec readVdb(const std::string& path)
         ioError(path, std::string("cannot read: ") + std::strerror(errno));
     }
     if (!fs::is_regular_file(path, ec)) ioError(path, "is not a regular file");
+}
+
+} // namespace
+
+openvdb::GridPtrVec readVdb(const std::string& path)
+{
+    checkReadable(path);
     openvdb::GridPtrVec grids;
     {
         const FileMapping file(path);
@@ -332,6 +374,139 @@ openvdb::GridPtrVec readVdb(const std::string& path)
     if (grids.empty()) grids = readWithOpenVdb(path);
     if (grids.empty()) ioError(path, "holds no grids");
     return grids;
+}
+
+struct PartialGrid::Impl
+{
+    std::string path;
+    std::unique_ptr<FileMapping> file;
+    FileLayout layout;
+    std::size_t index = 0; // the grid's, in layout.grids
+    StreamState state;
+    openvdb::FloatGrid::Ptr grid;
+    std::vector<LeafT*> leaves;
+};
+
+PartialGrid::PartialGrid(const std::string& path, const std::string& name)
+    : mImpl(std::make_unique<Impl>())
+{
+    Impl& m = *mImpl;
+    m.path = path;
+    checkReadable(path);
+    m.file = std::make_unique<FileMapping>(path);
+    m.layout = validateLayout(path, *m.file);
+    m.state.library = openvdb::VersionId(m.layout.libraryMajor, m.layout.libraryMinor);
+    m.state.fileVersion = m.layout.fileVersion;
+    // The grids without their trees, in the order readVdb() gives them, to pick one as
+    // selectGrid() picks it.
+    std::vector<std::pair<std::string, openvdb::GridBase::Ptr>> heads;
+    std::map<const openvdb::GridBase*, std::size_t> indexOf;
+    try {
+        for (std::size_t i = 0; i < m.layout.grids.size(); ++i) {
+            StreamState state = m.state;
+            auto g = readGridHead(m.layout.grids[i], *m.file, state, false);
+            indexOf[g.get()] = i;
+            heads.emplace_back(openvdb::io::GridDescriptor::stripSuffix(m.layout.grids[i].uniqueName), g);
+        }
+    } catch (const std::exception& e) {
+        ioError(path, "not a readable .vdb file: " + util::errorText(e));
+    }
+    if (heads.empty()) ioError(path, "holds no grids");
+    sortAsOpenVdb(heads, m.layout);
+    openvdb::GridPtrVec grids;
+    for (auto& h : heads) grids.push_back(h.second);
+    const openvdb::GridBase::Ptr chosen = selectGrid(grids, path, name);
+    if (!chosen->isType<openvdb::FloatGrid>()) {
+        throw ParamError(param::kGrid, "grid '" + chosen->getName() + "' holds " +
+                         chosen->valueType() + " values; this needs a float grid", path,
+                         ParamError::Kind::Missing);
+    }
+    m.index = indexOf.at(chosen.get());
+    const GridLayout& g = m.layout.grids[m.index];
+    if (!g.parent.empty() || !g.leavesWalked) {
+        ioError(path, "grid '" + chosen->getName() + "' shares another grid's tree or is not "
+                "stored as a standard tree; re-save the file (ivdb convert IN.vdb -o OUT.vdb)");
+    }
+    try {
+        m.grid = openvdb::gridPtrCast<openvdb::FloatGrid>(readGridHead(g, *m.file, m.state, true));
+        m.leaves = leavesInFileOrder(*m.grid, g);
+    } catch (const std::exception& e) {
+        ioError(path, "not a readable .vdb file: " + util::errorText(e));
+    }
+}
+
+PartialGrid::~PartialGrid() = default;
+
+const openvdb::FloatGrid::Ptr& PartialGrid::grid() const { return mImpl->grid; }
+
+const std::vector<PartialGrid::LeafT*>& PartialGrid::leaves() const { return mImpl->leaves; }
+
+void PartialGrid::load(const std::vector<std::uint64_t>& indices)
+{
+    Impl& m = *mImpl;
+    try {
+        readLeaves(*m.grid, m.layout.grids[m.index], *m.file, m.state, &indices);
+    } catch (const std::exception& e) {
+        ioError(m.path, "not a readable .vdb file: " + util::errorText(e));
+    }
+}
+
+void PartialGrid::checkValues(const std::vector<std::uint64_t>& indices) const
+{
+    const Impl& m = *mImpl;
+    const std::string what = m.path + ": grid '" + m.grid->getName() + "'";
+    const auto fail = [&](const std::string& where) {
+        OPENVDB_THROW(openvdb::ValueError, what + " holds values that are not finite (NaN or "
+            "infinity) " + where + "; the file is damaged or was written by a faulty tool, make "
+            "it again");
+    };
+    const openvdb::Vec3d vs = m.grid->voxelSize();
+    const openvdb::Vec3d origin = m.grid->transform().indexToWorld(openvdb::Vec3d(0.0));
+    for (int a = 0; a < 3; ++a) {
+        if (!std::isfinite(vs[a]) || !(vs[a] > 0.0) || !std::isfinite(origin[a])) {
+            OPENVDB_THROW(openvdb::ValueError, what + " has an invalid transform; the file is "
+                                                      "damaged, make it again");
+        }
+    }
+    const auto& root = m.grid->tree().root();
+    if (!std::isfinite(root.background())) fail("in its background");
+    if (m.grid->getGridClass() == openvdb::GRID_LEVEL_SET && !(root.background() > 0.0f)) {
+        OPENVDB_THROW(openvdb::ValueError, what + " is a level set with background " +
+            util::formatNumber(root.background()) + "; a level set's background (the band's "
+            "half width in world units) must be > 0, the file is damaged or not a level set");
+    }
+    const auto tile = [&](float v, const openvdb::Coord& at) {
+        if (!std::isfinite(v)) {
+            fail("in the tile at (" + std::to_string(at.x()) + ", " + std::to_string(at.y()) +
+                 ", " + std::to_string(at.z()) + ")");
+        }
+    };
+    for (auto it = root.cbeginValueAll(); it; ++it) tile(*it, it.getCoord());
+    for (auto n2 = root.cbeginChildOn(); n2; ++n2) {
+        for (auto it = n2->cbeginValueAll(); it; ++it) tile(*it, it.getCoord());
+        for (auto n1 = n2->cbeginChildOn(); n1; ++n1) {
+            for (auto it = n1->cbeginValueAll(); it; ++it) tile(*it, it.getCoord());
+        }
+    }
+    std::atomic<std::uint64_t> bad{std::numeric_limits<std::uint64_t>::max()};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, indices.size(), 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            const float* v = m.leaves[indices[i]]->buffer().data();
+            for (openvdb::Index k = 0; k < LeafT::SIZE; ++k) {
+                if (!std::isfinite(v[k])) {
+                    std::uint64_t seen = bad.load();
+                    while (indices[i] < seen && !bad.compare_exchange_weak(seen, indices[i])) {}
+                    break;
+                }
+            }
+        }
+    });
+    if (bad.load() != std::numeric_limits<std::uint64_t>::max()) {
+        const openvdb::Coord o = m.leaves[bad.load()]->origin();
+        fail("in the leaf at (" + std::to_string(o.x()) + ", " + std::to_string(o.y()) + ", " +
+             std::to_string(o.z()) + ")");
+    }
 }
 
 } // namespace ivdb::io

@@ -742,21 +742,33 @@ void LeafRun::appendEntries(const LeafRun& next)
     activeBox.expand(next.activeBox);
 }
 
-LeafRun encodeLeafRun(const openvdb::FloatGrid& run, const WriteOptions& options)
+namespace {
+
+template<typename GridT>
+LeafRun encodeRun(const GridT& run, const WriteOptions& options)
 {
-    openvdb::FloatGrid::ConstPtr grid = run.copy();
+    typename GridT::ConstPtr grid = run.copy();
     if (options.half) {
-        auto copy = openvdb::ConstPtrCast<openvdb::FloatGrid>(grid);
+        auto copy = openvdb::ConstPtrCast<GridT>(grid);
         copy->setSaveFloatAsHalf(true);
     }
-    return GridWriter<openvdb::FloatGrid>(*grid, compressionFlags(options.compression),
-                                          std::numeric_limits<std::uint64_t>::max()).encode();
+    return GridWriter<GridT>(*grid, compressionFlags(options.compression),
+                             std::numeric_limits<std::uint64_t>::max()).encode();
+}
+
+} // namespace
+
+LeafRun encodeLeafRun(const openvdb::FloatGrid& run, const WriteOptions& options)
+{
+    return encodeRun(run, options);
+}
+
+LeafRun encodeLeafRun(const openvdb::Vec3SGrid& run, const WriteOptions& options)
+{
+    return encodeRun(run, options);
 }
 
 namespace {
-
-using Int2T = openvdb::FloatTree::RootNodeType::ChildNodeType;
-using Int1T = Int2T::ChildNodeType;
 
 /// An internal node's topology as InternalNode::writeTopology writes it, for a node whose
 /// children are @a childMask and tiles the others (value mask @a valueMask): the masks, then the
@@ -765,11 +777,12 @@ template<typename NodeT, typename ValueOf>
 void writeNodeTable(std::ostream& os, const typename NodeT::NodeMaskType& childMask,
                     const typename NodeT::NodeMaskType& valueMask, ValueOf&& valueOf, bool toHalf)
 {
+    using ValueT = typename NodeT::ValueType;
     childMask.save(os);
     valueMask.save(os);
-    std::unique_ptr<float[]> values(new float[NodeT::NUM_VALUES]);
+    std::unique_ptr<ValueT[]> values(new ValueT[NodeT::NUM_VALUES]);
     for (openvdb::Index i = 0; i < NodeT::NUM_VALUES; ++i) {
-        values[i] = childMask.isOn(i) ? 0.0f : valueOf(i);
+        values[i] = childMask.isOn(i) ? openvdb::zeroVal<ValueT>() : valueOf(i);
     }
     openvdb::io::writeCompressedValues(os, values.get(), NodeT::NUM_VALUES, valueMask, childMask,
                                        toHalf);
@@ -778,16 +791,19 @@ void writeNodeTable(std::ostream& os, const typename NodeT::NodeMaskType& childM
 /// Tree::writeTopology of the grid @a skeleton stands for: its 128^3 nodes' active tiles are
 /// leaves, of which there are @a leafCount; their value masks are written as zeros, and where
 /// they go is recorded in @a runs (offsets from @a base, the stream's start in the file).
-void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
-                           std::uint64_t leafCount, bool toHalf, std::uint64_t base,
-                           std::vector<FileHead::MaskRun>& runs)
+template<typename TreeT>
+void writeSkeletonTopology(std::ostream& os, const TreeT& skeleton, std::uint64_t leafCount,
+                           bool toHalf, std::uint64_t base, std::vector<FileHead::MaskRun>& runs)
 {
+    using ValueT = typename TreeT::ValueType;
+    using Int2T = typename TreeT::RootNodeType::ChildNodeType;
+    using Int1T = typename Int2T::ChildNodeType;
     const std::int32_t bufferCount = 1;
     os.write(reinterpret_cast<const char*>(&bufferCount), sizeof(bufferCount));
     const auto& root = skeleton.root();
-    const float& bg = root.background();
-    const float bgOut = toHalf ? openvdb::io::truncateRealToHalf(bg) : bg;
-    os.write(reinterpret_cast<const char*>(&bgOut), sizeof(float));
+    const ValueT& bg = root.background();
+    const ValueT bgOut = toHalf ? openvdb::io::truncateRealToHalf(bg) : bg;
+    os.write(reinterpret_cast<const char*>(&bgOut), sizeof(ValueT));
     openvdb::io::setGridBackgroundValuePtr(os, &bg);
     openvdb::Index tiles = 0;
     for (auto it = root.cbeginValueAll(); it; ++it) ++tiles;
@@ -799,7 +815,7 @@ void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
     if (tiles + children > 0) {
         for (auto it = root.cbeginValueAll(); it; ++it) {
             const openvdb::Coord o = it.getCoord();
-            const float v = *it;
+            const ValueT v = *it;
             const bool active = it.isValueOn();
             os.write(reinterpret_cast<const char*>(o.asPointer()), 3 * sizeof(std::int32_t));
             os.write(reinterpret_cast<const char*>(&v), sizeof(v));
@@ -810,16 +826,16 @@ void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
             os.write(reinterpret_cast<const char*>(o.asPointer()), 3 * sizeof(std::int32_t));
             const Int2T& n2 = *it2;
             if (!n2.getValueMask().isOff()) {
-                OPENVDB_THROW(openvdb::ValueError, "a level set's skeleton has an active tile "
-                              "above its 128^3 nodes");
+                OPENVDB_THROW(openvdb::ValueError, "a skeleton has an active tile above its "
+                              "128^3 nodes");
             }
             writeNodeTable<Int2T>(os, n2.getChildMask(), n2.getValueMask(),
                 [&](openvdb::Index i) { return n2.getValue(n2.offsetToGlobalCoord(i)); }, toHalf);
             for (auto it1 = n2.cbeginChildOn(); it1; ++it1) {
                 const Int1T& n1 = *it1;
                 // The active tiles are the leaves: they become the child mask.
-                const Int1T::NodeMaskType leaves = n1.getValueMask();
-                writeNodeTable<Int1T>(os, leaves, Int1T::NodeMaskType(),
+                const typename Int1T::NodeMaskType leaves = n1.getValueMask();
+                writeNodeTable<Int1T>(os, leaves, typename Int1T::NodeMaskType(),
                     [&](openvdb::Index i) { return n1.getValue(n1.offsetToGlobalCoord(i)); }, toHalf);
                 const std::uint64_t count = leaves.countOn();
                 if (count == 0) continue;
@@ -835,59 +851,45 @@ void writeSkeletonTopology(std::ostream& os, const openvdb::FloatTree& skeleton,
     }
 }
 
-} // namespace
-
-FileHead vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& leaves,
-                     std::uint64_t bufferBytes, const openvdb::MetaMap& fileMetadata,
-                     const WriteOptions& options)
+/// One grid's part of the head, from its descriptor on, starting at file offset @a at (the
+/// stream @a os is the head's bytes so far, of which @a out is the string): writeTypedGrid's
+/// steps, with the statistics and table from the runs' entries.
+template<typename GridT>
+void writeGridHead(std::ostream& os, std::string& out, std::uint64_t at, const std::string& name,
+                   const GridT& grid, const LeafRun& leaves, std::uint64_t bufferBytes,
+                   std::uint32_t flags, std::vector<FileHead::MaskRun>& runs)
 {
-    auto grid = openvdb::ConstPtrCast<openvdb::FloatGrid>(skeletonIn.copy());
-    if (options.half) grid->setSaveFloatAsHalf(true);
-    const bool half = grid->saveFloatAsHalf();
-    const std::uint32_t flags = compressionFlags(options.compression);
+    using LeafT = typename GridT::TreeType::LeafNodeType;
+    const bool half = grid.saveFloatAsHalf();
     std::uint32_t gridFlags = flags;
-    if (grid->getGridClass() == openvdb::GRID_LEVEL_SET ||
-        grid->getGridClass() == openvdb::GRID_FOG_VOLUME) {
+    if (grid.getGridClass() == openvdb::GRID_LEVEL_SET ||
+        grid.getGridClass() == openvdb::GRID_FOG_VOLUME) {
         gridFlags &= ~openvdb::io::COMPRESS_ZIP;
     }
-    std::string out;
-    StringSink sink(out);
-    std::ostream os(&sink);
-    // writeVdbStream's steps for a file of one grid.
-    ArchiveParts archive(flags);
-    openvdb::io::setDataCompression(os, flags);
-    openvdb::io::setWriteGridStatsMetadata(os, true);
-    archive.header(os);
-    fileMetadata.writeMeta(os);
-    const std::int32_t count = 1;
-    os.write(reinterpret_cast<const char*>(&count), sizeof(count));
-    const std::string name = uniqueNames({grid})[0];
-    openvdb::io::GridDescriptor gd(name, grid->type(), half);
+    openvdb::io::GridDescriptor gd(name, grid.type(), half);
     gd.writeHeader(os);
     const std::size_t offsets = out.size();
     gd.writeStreamPos(os);
-    gd.setGridPos(std::int64_t(out.size()));
+    gd.setGridPos(std::int64_t(at + out.size()));
 
-    // GridWriter::write's record, with the statistics and table from the runs' entries.
     const std::size_t n = leaves.codes.size();
     std::string head;
-    std::vector<FileHead::MaskRun> runs;
     {
         StringSink hsink(head);
         std::ostream hs(&hsink);
         hs.copyfmt(os);
         openvdb::io::setDataCompression(hs, gridFlags);
-        grid->writeTransform(hs);
-        writeSkeletonTopology(hs, grid->tree(), n, half, 0, runs);
+        grid.writeTransform(hs);
+        writeSkeletonTopology(hs, grid.tree(), n, half, 0, runs);
     }
-    auto meta = openvdb::ConstPtrCast<openvdb::GridBase>(grid->copyGrid());
-    const auto leafBytes = openvdb::FloatTree::LeafNodeType(openvdb::Coord(), 0.0f).memUsage();
+    auto meta = openvdb::ConstPtrCast<openvdb::GridBase>(grid.copyGrid());
+    const auto leafBytes = LeafT(openvdb::Coord(), openvdb::zeroVal<typename GridT::ValueType>()).memUsage();
     meta->insertMeta(openvdb::GridBase::META_FILE_BBOX_MIN,
                      openvdb::Vec3IMetadata(leaves.activeBox.min().asVec3i()));
     meta->insertMeta(openvdb::GridBase::META_FILE_BBOX_MAX,
                      openvdb::Vec3IMetadata(leaves.activeBox.max().asVec3i()));
     meta->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::Int64Metadata(std::int64_t(
-        grid->tree().memUsage() + n * leafBytes)));
+        grid.tree().memUsage() + n * leafBytes)));
     meta->insertMeta(openvdb::GridBase::META_FILE_VOXEL_COUNT,
                      openvdb::Int64Metadata(std::int64_t(leaves.activeVoxels)));
     meta->insertMeta("file_compression",
@@ -911,10 +913,10 @@ FileHead vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& leaves
     meta->insertMeta("file_delayed_load", table);
     meta->writeMeta(os);
     // The mask runs' offsets were from the record's start: now from the file's.
-    const std::uint64_t headStart = out.size();
+    const std::uint64_t headStart = at + out.size();
     for (auto& r : runs) r.offset += headStart;
     os.write(head.data(), std::streamsize(head.size()));
-    const std::int64_t blockPos = std::int64_t(out.size());
+    const std::int64_t blockPos = std::int64_t(at + out.size());
     gd.setBlockPos(blockPos);
     gd.setEndPos(blockPos + std::int64_t(bufferBytes));
     // The descriptor's offsets, patched in as writeTypedGrid seeks back to write them.
@@ -925,17 +927,92 @@ FileHead vdbFileHead(const openvdb::FloatGrid& skeletonIn, const LeafRun& leaves
         gd.writeStreamPos(ps);
     }
     out.replace(offsets, pos.size(), pos);
+    openvdb::io::setDataCompression(os, flags);
+}
+
+} // namespace
+
+FileHead vdbFileHead(const std::vector<HeadGrid>& input, const openvdb::MetaMap& fileMetadata,
+                     const WriteOptions& options)
+{
+    openvdb::GridCPtrVec grids;
+    for (const HeadGrid& g : input) {
+        if (!g.skeleton || !g.leaves) OPENVDB_THROW(openvdb::ValueError, "a grid without a skeleton or entries");
+        auto copy = openvdb::ConstPtrCast<GridBase>(g.skeleton->copyGrid());
+        if (options.half) copy->setSaveFloatAsHalf(true);
+        grids.push_back(copy);
+    }
+    const std::uint32_t flags = compressionFlags(options.compression);
+    const std::vector<std::string> names = uniqueNames(grids);
     FileHead result;
-    result.bytes = std::move(out);
-    result.maskRuns = std::move(runs);
+    std::uint64_t at = 0;
+    for (std::size_t g = 0; g < grids.size(); ++g) {
+        FileHead::Grid part;
+        part.at = at;
+        StringSink sink(part.bytes);
+        std::ostream os(&sink);
+        openvdb::io::setDataCompression(os, flags);
+        openvdb::io::setWriteGridStatsMetadata(os, true);
+        if (g == 0) {
+            // writeVdbStream's steps for the file's start.
+            ArchiveParts archive(flags);
+            archive.header(os);
+            fileMetadata.writeMeta(os);
+            const std::int32_t count = std::int32_t(grids.size());
+            os.write(reinterpret_cast<const char*>(&count), sizeof(count));
+        }
+        const HeadGrid& in = input[g];
+        const bool typed = grids[g]->apply<openvdb::TypeList<openvdb::FloatGrid, openvdb::Vec3SGrid>>(
+            [&](const auto& grid) {
+                writeGridHead(os, part.bytes, at, names[g], grid, *in.leaves, in.bufferBytes, flags,
+                              part.maskRuns);
+            });
+        if (!typed) {
+            OPENVDB_THROW(openvdb::ValueError, "grid '" + grids[g]->getName() + "' is a " +
+                          grids[g]->valueType() + " grid; the pieces are float or vec3s grids");
+        }
+        at = part.buffersAt() + in.bufferBytes;
+        result.grids.push_back(std::move(part));
+    }
+    result.fileBytes = at;
     return result;
 }
 
+FileHead vdbFileHead(const openvdb::FloatGrid& skeleton, const LeafRun& leaves,
+                     std::uint64_t bufferBytes, const openvdb::MetaMap& fileMetadata,
+                     const WriteOptions& options)
+{
+    return vdbFileHead({HeadGrid{skeleton.copy(), &leaves, bufferBytes}}, fileMetadata, options);
+}
+
+openvdb::FloatGrid::Ptr skeletonOf(const openvdb::FloatGrid& grid)
+{
+    // A copy of a leaf that holds no values holds none either: the copy costs the topology.
+    auto skeleton = grid.deepCopy();
+    using Int1T = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
+    std::vector<Int1T*> nodes;
+    skeleton->tree().getNodes(nodes);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nodes.size()),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            for (auto it = nodes[i]->beginChildOn(); it; ++it) {
+                nodes[i]->addTile(it.pos(), 0.0f, true);
+            }
+        }
+    });
+    return skeleton;
+}
+
 std::vector<std::pair<std::uint64_t, std::string>>
-FileHead::maskWrites(std::uint64_t first, const std::vector<LeafRun::Mask>& masks) const
+FileHead::maskWrites(std::size_t grid, std::uint64_t first, const std::vector<LeafRun::Mask>& masks) const
 {
     std::vector<std::pair<std::uint64_t, std::string>> out;
     if (masks.empty()) return out;
+    if (grid >= grids.size()) {
+        OPENVDB_THROW(openvdb::ValueError, "grid " + std::to_string(grid) + " of " +
+                      std::to_string(grids.size()));
+    }
+    const std::vector<MaskRun>& maskRuns = grids[grid].maskRuns;
     const std::uint64_t end = first + masks.size();
     // The run holding leaf `first`: the last that starts at or before it.
     auto it = std::upper_bound(maskRuns.begin(), maskRuns.end(), first,
@@ -960,21 +1037,28 @@ FileHead::maskWrites(std::uint64_t first, const std::vector<LeafRun::Mask>& mask
     return out;
 }
 
-std::vector<std::pair<std::uint64_t, std::uint64_t>> FileHead::nonMaskParts() const
+std::vector<FileHead::Part> FileHead::nonMaskParts() const
 {
-    std::vector<std::pair<std::uint64_t, std::uint64_t>> out;
-    std::uint64_t at = 0;
-    for (const MaskRun& r : maskRuns) {
-        if (r.offset > at) out.emplace_back(at, r.offset - at);
-        at = r.offset + r.leaves * LeafRun::Mask::memUsage();
+    std::vector<Part> out;
+    for (const Grid& g : grids) {
+        std::uint64_t at = g.at;
+        const auto add = [&](std::uint64_t from, std::uint64_t to) {
+            if (to > from) out.push_back({from, g.bytes.data() + (from - g.at), to - from});
+        };
+        for (const MaskRun& r : g.maskRuns) {
+            add(at, r.offset);
+            at = r.offset + r.leaves * LeafRun::Mask::memUsage();
+        }
+        add(at, g.buffersAt());
     }
-    if (bytes.size() > at) out.emplace_back(at, bytes.size() - at);
     return out;
 }
 
-void FileHead::putMasks(std::uint64_t first, const std::vector<LeafRun::Mask>& masks)
+void FileHead::putMasks(std::size_t grid, std::uint64_t first, const std::vector<LeafRun::Mask>& masks)
 {
-    for (const auto& [offset, data] : maskWrites(first, masks)) bytes.replace(offset, data.size(), data);
+    for (const auto& [offset, data] : maskWrites(grid, first, masks)) {
+        grids[grid].bytes.replace(offset - grids[grid].at, data.size(), data);
+    }
 }
 
 void writeVdb(const std::string& path, const openvdb::GridCPtrVec& grids,

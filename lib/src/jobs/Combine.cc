@@ -47,15 +47,20 @@ CombineResult combine(const CombineOptions& opt)
                                   "operation needs); the level set written is empty");
     }
     result.computeSeconds = clock.lap();
-    const std::string what =
-        opt.p ? std::string("blend ") + implicit::toString(opt.op) + " p=" + util::formatNumber(*opt.p)
-        : opt.k ? std::string("blend ") + implicit::toString(opt.op) + " k=" + util::formatNumber(*opt.k)
-                : std::string("csg ") + implicit::toString(opt.op);
-    io::stampGrid(*result.surface, what + " " + detail::joined(opt.inputs));
+    io::stampGrid(*result.surface, combineSource(opt));
     if (opt.fog) result.density = detail::fogWithStamps(*result.surface);
     detail::writeGrids(opt.output, {result.surface, result.density}, opt.write);
     result.totalSeconds = clock.total();
     return result;
+}
+
+std::string combineSource(const CombineOptions& opt)
+{
+    const std::string what =
+        opt.p ? std::string("blend ") + implicit::toString(opt.op) + " p=" + util::formatNumber(*opt.p)
+        : opt.k ? std::string("blend ") + implicit::toString(opt.op) + " k=" + util::formatNumber(*opt.k)
+                : std::string("csg ") + implicit::toString(opt.op);
+    return what + " " + detail::joined(opt.inputs);
 }
 
 } // namespace ivdb::jobs

@@ -24,17 +24,23 @@ GradientResult gradient(const GradientOptions& opt)
     result.gradient = diff::gradient(*result.input, opt.step);
     result.computeSeconds = clock.lap();
 
-    const std::string source = opt.input + ":" + result.input->getName();
-    io::stampGrid(*result.gradient, source);
-    result.gradient->insertMeta("ivdb_step_voxels", openvdb::Int32Metadata(opt.step));
     if (opt.magnitude) {
         result.magnitude = diff::magnitude(*result.gradient);
-        io::stampGrid(*result.magnitude, source);
+        stampGradient(*result.magnitude, opt, result.input->getName());
     }
+    stampGradient(*result.gradient, opt, result.input->getName());
     detail::writeGrids(opt.output, {result.gradient, result.magnitude,
                                     opt.withInput ? result.input : nullptr}, opt.write);
     result.totalSeconds = clock.total();
     return result;
+}
+
+void stampGradient(openvdb::GridBase& grid, const GradientOptions& opt, const std::string& gridName)
+{
+    io::stampGrid(grid, opt.input + ":" + gridName);
+    if (grid.isType<openvdb::Vec3SGrid>()) {
+        grid.insertMeta("ivdb_step_voxels", openvdb::Int32Metadata(opt.step));
+    }
 }
 
 const std::vector<std::string>& curvatureMethodNames()
@@ -59,6 +65,26 @@ const char* convention(CurvatureMethod method)
 
 } // namespace
 
+std::vector<openvdb::FloatGrid::Ptr> curvatureGrids(const openvdb::FloatGrid& phi,
+                                                    CurvatureMethod method,
+                                                    const diff::LeafList* only)
+{
+    if (method == CurvatureMethod::Principal) {
+        auto [k1, k2] = diff::principalCurvatures(phi, true, only);
+        return {k1, k2};
+    }
+    const diff::Curvature kind = method == CurvatureMethod::Gaussian ? diff::Curvature::Gaussian
+                               : method == CurvatureMethod::Laplacian ? diff::Curvature::Laplacian
+                                                                      : diff::Curvature::Mean;
+    return {diff::curvature(phi, kind, true, only)};
+}
+
+void stampCurvature(openvdb::GridBase& grid, const CurvatureOptions& opt, const std::string& gridName)
+{
+    io::stampGrid(grid, opt.input + ":" + gridName);
+    grid.insertMeta("ivdb_curvature", openvdb::StringMetadata(convention(opt.method)));
+}
+
 CurvatureResult curvature(const CurvatureOptions& opt)
 {
     Stopwatch clock;
@@ -66,20 +92,11 @@ CurvatureResult curvature(const CurvatureOptions& opt)
     CurvatureResult result;
     result.input = readLevelSet(opt.input, opt.grid);
     result.readSeconds = clock.lap();
-    if (opt.method == CurvatureMethod::Principal) {
-        auto [k1, k2] = diff::principalCurvatures(*result.input);
-        result.grids = {k1, k2};
-    } else {
-        const diff::Curvature kind = opt.method == CurvatureMethod::Gaussian ? diff::Curvature::Gaussian
-                                   : opt.method == CurvatureMethod::Laplacian ? diff::Curvature::Laplacian
-                                                                              : diff::Curvature::Mean;
-        result.grids = {diff::curvature(*result.input, kind)};
-    }
+    result.grids = curvatureGrids(*result.input, opt.method);
     result.computeSeconds = clock.lap();
     std::vector<openvdb::GridBase::ConstPtr> out;
     for (auto& g : result.grids) {
-        io::stampGrid(*g, opt.input + ":" + result.input->getName());
-        g->insertMeta("ivdb_curvature", openvdb::StringMetadata(convention(opt.method)));
+        stampCurvature(*g, opt, result.input->getName());
         out.push_back(g);
     }
     if (opt.withInput) out.push_back(result.input);

@@ -8,11 +8,16 @@
 #include <openvdb/util/NullInterrupter.h>
 
 #include <string>
+#include <vector>
 
 namespace ivdb::diff {
 
 /// @brief The largest gradient step, in voxels (limits::kStep).
 inline constexpr int kMaxStep = int(limits::kStep.hi);
+
+/// @brief The leaves of a level set an operator computes (null: every leaf): ivdb-mpi's ranks
+/// each compute a run of them; the others are only read, as the listed leaves' neighbours.
+using LeafList = std::vector<const openvdb::FloatTree::LeafNodeType*>;
 
 /// @brief Central-difference gradient (docs/method.md#discrete-gradient) with a step of @a step voxels:
 /// (phi(x + K) - phi(x - K)) / (2 K dx) per axis, in world units.
@@ -24,7 +29,7 @@ inline constexpr int kMaxStep = int(limits::kStep.hi);
 /// @throw ParamError if @a step is not in [1, kMaxStep]; openvdb::ValueError if the grid has a non-uniform
 /// voxel size
 openvdb::Vec3SGrid::Ptr gradient(const openvdb::FloatGrid& phi, int step = 1,
-                                 bool threaded = true);
+                                 bool threaded = true, const LeafList* only = nullptr);
 
 /// @brief |gradient| per active voxel, named "gradient_magnitude".
 openvdb::FloatGrid::Ptr magnitude(const openvdb::Vec3SGrid& gradient);
@@ -42,11 +47,12 @@ enum class Curvature {
 /// @brief Curvature of the level sets of @a phi at every active voxel (second-order central
 /// differences, 3x3x3 stencil), named "curvature". A zero gradient gives 0.
 openvdb::FloatGrid::Ptr curvature(const openvdb::FloatGrid& phi, Curvature kind,
-                                  bool threaded = true);
+                                  bool threaded = true, const LeafList* only = nullptr);
 
 /// @brief Principal curvatures k1 >= k2 (H +/- sqrt(H^2 - K)), named "k1" and "k2".
 std::pair<openvdb::FloatGrid::Ptr, openvdb::FloatGrid::Ptr>
-principalCurvatures(const openvdb::FloatGrid& phi, bool threaded = true);
+principalCurvatures(const openvdb::FloatGrid& phi, bool threaded = true,
+                    const LeafList* only = nullptr);
 
 /// @brief Summary statistics of one error measure over the band.
 struct ErrorStats

@@ -45,4 +45,8 @@ struct CombineResult
 /// the operations throw. Nothing is written on any error.
 CombineResult combine(const CombineOptions& options);
 
+/// @brief What combine() stamps as the result's `ivdb_source`: the operation and the inputs
+/// ("csg union a.vdb b.vdb").
+std::string combineSource(const CombineOptions& options);
+
 } // namespace ivdb::jobs

@@ -37,6 +37,11 @@ struct GradientResult
 /// any error.
 GradientResult gradient(const GradientOptions& options);
 
+/// @brief Stamp @a grid, the gradient or its magnitude made from grid @a gridName of the file
+/// @a input, with what gradient() writes (ivdb_source and ivdb_step_voxels for the gradient).
+void stampGradient(openvdb::GridBase& grid, const GradientOptions& options,
+                   const std::string& gridName);
+
 enum class CurvatureMethod { Mean, Gaussian, Principal, Laplacian };
 
 /// @brief "mean", "gaussian", "principal", "laplacian".
@@ -60,6 +65,17 @@ struct CurvatureResult
 /// @brief Curvature of a level set from a file, each grid stamped with its convention
 /// (`ivdb_curvature` metadata).
 CurvatureResult curvature(const CurvatureOptions& options);
+
+/// @brief diff::curvature() or diff::principalCurvatures() as @a method asks, on the leaves
+/// @a only (null: all): `curvature`, or `k1` and `k2`.
+std::vector<openvdb::FloatGrid::Ptr> curvatureGrids(const openvdb::FloatGrid& phi,
+                                                    CurvatureMethod method,
+                                                    const diff::LeafList* only = nullptr);
+
+/// @brief Stamp @a grid, a curvature made from grid @a gridName of @a options' input, with
+/// what curvature() writes (ivdb_source and the convention, ivdb_curvature).
+void stampCurvature(openvdb::GridBase& grid, const CurvatureOptions& options,
+                    const std::string& gridName);
 
 /// @brief What compareGradient() does: rasterize a scene and compare the discrete gradient of
 /// its band with the shape's normalized analytic gradient.

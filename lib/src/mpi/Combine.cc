@@ -1,0 +1,311 @@
+// SPDX-License-Identifier: Apache-2.0
+// ivdb-mpi's csg: the inputs' 128^3 nodes split over the ranks of a communicator, each rank
+// reading and combining only its own, into one .vdb file written by all of them at once.
+#include <ivdb/mpi/Combine.h>
+
+#include "Common.h"
+
+#include <ivdb/Version.h>
+#include <ivdb/io/AtomicFile.h>
+#include <ivdb/io/VdbPieces.h>
+#include <ivdb/levelset/LevelSet.h>
+#include <ivdb/ops/Csg.h>
+#include <ivdb/util/Params.h>
+#include <ivdb/util/System.h>
+
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/Prune.h>
+
+#include <algorithm>
+#include <map>
+#include <memory>
+#include <set>
+
+namespace ivdb::mpi {
+
+using namespace detail;
+
+namespace {
+
+using openvdb::Coord;
+using TreeT = openvdb::FloatTree;
+using LeafT = TreeT::LeafNodeType;
+using Int2T = TreeT::RootNodeType::ChildNodeType;
+using Int1T = Int2T::ChildNodeType;
+
+/// The order of 128^3 nodes in a file: by their parent's origin (the root's map order), then by
+/// their own (their offset in the parent, x-major).
+bool fileOrder(const Coord& a, const Coord& b)
+{
+    const Coord pa = a & ~(Int2T::DIM - 1), pb = b & ~(Int2T::DIM - 1);
+    return pa != pb ? pa < pb : a < b;
+}
+
+/// What a rank tells rank 0 of one of its 128^3 nodes in the result: a node (its slots: which
+/// are leaves, the others' tile values and states), or the tile it became.
+struct NodeReport
+{
+    std::int32_t origin[3] = {0, 0, 0};
+    std::int32_t isNode = 0, active = 0;
+    float tile = 0.0f;
+};
+
+/// A 128^3 node's slots as sent: the child (leaf) and value masks and every slot's value.
+struct NodeTable
+{
+    Int1T::NodeMaskType children, values;
+    float tiles[Int1T::NUM_VALUES];
+};
+
+/// The rank's share of the inputs: each input's tree with every 128^3 node not in @a mine
+/// replaced by an active tile (so that no node above it is pruned on this partial view; the
+/// values there are never used), and the leaves of @a mine read.
+openvdb::FloatGrid::Ptr ownPart(io::PartialGrid& part, const std::set<Coord>& mine,
+                                std::uint64_t& leavesRead)
+{
+    std::vector<std::uint64_t> indices;
+    const auto& leaves = part.leaves();
+    for (std::uint64_t i = 0; i < leaves.size(); ++i) {
+        if (mine.count(leaves[i]->origin() & ~(Int1T::DIM - 1))) indices.push_back(i);
+    }
+    part.load(indices);
+    part.checkValues(indices);
+    leavesRead += indices.size();
+    const openvdb::FloatGrid::Ptr grid = part.grid();
+    const float bg = grid->background();
+    std::vector<Int2T*> parents;
+    grid->tree().getNodes(parents);
+    for (Int2T* n2 : parents) {
+        for (auto it = n2->beginChildOn(); it; ++it) {
+            if (!mine.count(it->origin())) n2->addTile(it.pos(), bg, true);
+        }
+    }
+    grid->tree().clearAllAccessors();
+    return grid;
+}
+
+} // namespace
+
+CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
+{
+    const auto start = Clock::now();
+    const int rank = rankOf(comm), size = sizeOf(comm);
+    CsgResult result;
+    result.ranks = size;
+
+    // Every rank: the inputs' topologies, no values.
+    std::vector<std::unique_ptr<io::PartialGrid>> parts;
+    collective(comm, [&] {
+        if (opt.p || opt.k) {
+            throw ParamError(opt.p ? param::kBlendP : param::kSmoothK, "blends run in one process "
+                             "(ivdb blend); ivdb-mpi combines sharply");
+        }
+        if (opt.inputs.size() < 2) {
+            throw ParamError(param::kInputs, "must be at least two files, got " +
+                                                 std::to_string(opt.inputs.size()));
+        }
+        if (opt.fog) {
+            OPENVDB_THROW(openvdb::ValueError, "a fog volume is made in one process (ivdb csg "
+                          "--fog, or ivdb convert of the level set ivdb-mpi writes)");
+        }
+        if (rank == 0 && !opt.output.empty()) io::checkOutputPath(opt.output);
+        for (const std::string& path : opt.inputs) {
+            parts.push_back(std::make_unique<io::PartialGrid>(path, opt.grid));
+            const openvdb::FloatGrid& g = *parts.back()->grid();
+            const std::string what = path + ": grid '" + g.getName() + "'";
+            levelset::checkLevelSet(g, what);
+            if (g.tree().hasActiveTiles()) {
+                OPENVDB_THROW(openvdb::ValueError, what + " has active tiles: ivdb-mpi reads "
+                              "level sets whose band is in leaves, as OpenVDB and ivdb write "
+                              "them; plain ivdb takes this one");
+            }
+        }
+        std::vector<openvdb::FloatGrid::Ptr> grids;
+        for (const auto& p : parts) grids.push_back(p->grid());
+        const openvdb::FloatGrid& finest = ops::finestInput(grids);
+        for (std::size_t i = 0; i < parts.size(); ++i) {
+            const openvdb::FloatGrid& g = *parts[i]->grid();
+            if (g.transform() != finest.transform()) {
+                throw ParamError(param::kInputs, "grid '" + g.getName() + "' is on another "
+                                 "transform (voxel size " + util::formatNumber(g.voxelSize()[0]) +
+                                 ") than the finest input's (" +
+                                 util::formatNumber(finest.voxelSize()[0]) + "): ivdb-mpi "
+                                 "combines level sets on one lattice; plain ivdb csg resamples "
+                                 "them", opt.inputs[i]);
+            }
+        }
+    });
+
+    // The 128^3 nodes any input holds, in file order, weighed by their leaves (and one each).
+    std::map<Coord, std::uint64_t> weight;
+    for (const auto& p : parts) {
+        for (const LeafT* leaf : p->leaves()) ++weight[leaf->origin() & ~(Int1T::DIM - 1)];
+        std::vector<const Int1T*> nodes;
+        p->grid()->tree().getNodes(nodes);
+        for (const Int1T* n : nodes) weight[n->origin()] += 1;
+    }
+    std::vector<std::pair<Coord, std::uint64_t>> units(weight.begin(), weight.end());
+    weight.clear();
+    std::sort(units.begin(), units.end(), [](const auto& a, const auto& b) {
+        return fileOrder(a.first, b.first);
+    });
+    result.nodes = units.size();
+    std::uint64_t total = 0;
+    for (const auto& u : units) total += u.second;
+    // Rank r: the nodes whose weight before them lies in [total r / N, total (r + 1) / N).
+    std::vector<Coord> mineInOrder;
+    {
+        std::uint64_t before = 0;
+        const std::uint64_t lo = total * std::uint64_t(rank) / std::uint64_t(size);
+        const std::uint64_t hi = total * std::uint64_t(rank + 1) / std::uint64_t(size);
+        for (const auto& u : units) {
+            if (before >= lo && before < hi) mineInOrder.push_back(u.first);
+            before += u.second;
+        }
+    }
+    units.clear();
+    const std::set<Coord> mine(mineInOrder.begin(), mineInOrder.end());
+
+    // Each rank: its nodes' leaves, and the CSG of its part.
+    std::uint64_t leavesRead = 0;
+    openvdb::FloatGrid::Ptr combined;
+    std::vector<std::string> notes;
+    double readSeconds = 0.0;
+    collective(comm, [&] {
+        std::vector<openvdb::FloatGrid::Ptr> grids;
+        for (auto& p : parts) grids.push_back(ownPart(*p, mine, leavesRead));
+        parts.clear();
+        readSeconds = secondsSince(start);
+        combined = ops::csgInPlace(opt.op, grids, &notes);
+    });
+    const double computeSeconds = secondsSince(start) - readSeconds;
+    const auto writeStart = Clock::now();
+
+    // What each of its nodes became; the others' (placeholders) are dropped.
+    std::vector<NodeReport> reports;
+    std::vector<NodeTable> tables;
+    openvdb::FloatGrid::Ptr own = openvdb::FloatGrid::create(combined->background());
+    own->setGridClass(openvdb::GRID_LEVEL_SET);
+    {
+        TreeT& tree = combined->tree();
+        for (const Coord& o : mineInOrder) {
+            NodeReport r;
+            for (int a = 0; a < 3; ++a) r.origin[a] = o[a];
+            if (const Int1T* n = tree.probeConstNode<Int1T>(o)) {
+                r.isNode = 1;
+                NodeTable t;
+                t.children = n->getChildMask();
+                t.values = n->getValueMask();
+                for (openvdb::Index i = 0; i < Int1T::NUM_VALUES; ++i) {
+                    t.tiles[i] = t.children.isOn(i) ? 0.0f : n->getValue(n->offsetToGlobalCoord(i));
+                }
+                for (auto it = n->cbeginChildOn(); it; ++it) own->tree().addLeaf(new LeafT(*it));
+                tables.push_back(t);
+            } else {
+                r.tile = tree.getValue(o);
+                r.active = tree.isValueOn(o) ? 1 : 0;
+            }
+            reports.push_back(r);
+        }
+    }
+    io::LeafRun encoded;
+    collective(comm, [&] { encoded = io::encodeLeafRun(*own, opt.write); });
+    own.reset();
+    const std::vector<RunSummary> summaries = gatherSummaries(comm, encoded);
+    io::LeafRun all = gatherEntries(comm, encoded, summaries);
+    encoded.codes.clear();
+    encoded.sizes.clear();
+
+    // Rank 0: every rank's nodes into its own result's nodes and tiles (right everywhere but on
+    // the other ranks' nodes), pruned as OpenVDB prunes a level set, and the file's head.
+    std::uint64_t counts[2] = {reports.size(), tables.size()};
+    std::vector<std::uint64_t> allCounts(2 * std::size_t(size));
+    MPI_Allgather(counts, 2, MPI_UINT64_T, allCounts.data(), 2, MPI_UINT64_T, comm);
+    io::FileHead head;
+    if (rank == 0) {
+        for (int r = 1; r < size; ++r) {
+            std::vector<NodeReport> rr(allCounts[2 * std::size_t(r)]);
+            std::vector<NodeTable> rt(allCounts[2 * std::size_t(r) + 1]);
+            recvBlob(comm, r, 5, rr.data(), rr.size() * sizeof(NodeReport));
+            recvBlob(comm, r, 6, rt.data(), rt.size() * sizeof(NodeTable));
+            reports.insert(reports.end(), rr.begin(), rr.end());
+            tables.insert(tables.end(), rt.begin(), rt.end());
+        }
+    } else {
+        sendBlob(comm, 0, 5, reports.data(), reports.size() * sizeof(NodeReport));
+        sendBlob(comm, 0, 6, tables.data(), tables.size() * sizeof(NodeTable));
+        reports.clear();
+        tables.clear();
+    }
+    std::uint64_t activeVoxels = 0, bufferBytes = 0, leaves = 0;
+    for (const RunSummary& s : summaries) {
+        activeVoxels += s.activeVoxels;
+        bufferBytes += s.bytes;
+        leaves += s.leaves;
+    }
+    collective(comm, [&] {
+        if (rank != 0) return;
+        const openvdb::FloatGrid::Ptr skeleton = io::skeletonOf(*combined);
+        combined.reset();
+        TreeT& tree = skeleton->tree();
+        std::size_t table = 0;
+        for (const NodeReport& r : reports) {
+            const Coord o(r.origin[0], r.origin[1], r.origin[2]);
+            if (!r.isNode) {
+                tree.addTile(2, o, r.tile, r.active != 0);
+                continue;
+            }
+            const NodeTable& t = tables[table++];
+            tree.addTile(1, o, t.tiles[0], t.values.isOn(0)); // makes the node
+            Int1T* n = tree.probeNode<Int1T>(o);
+            for (openvdb::Index i = 0; i < Int1T::NUM_VALUES; ++i) {
+                if (t.children.isOn(i)) n->addTile(i, 0.0f, true); // a leaf
+                else n->addTile(i, t.tiles[i], t.values.isOn(i));
+            }
+        }
+        openvdb::tools::pruneLevelSet(tree);
+        io::stampGrid(*skeleton, jobs::combineSource(opt));
+        openvdb::MetaMap fileMeta;
+        fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
+        head = io::vdbFileHead(*skeleton, all, bufferBytes, fileMeta, opt.write);
+    });
+    all = io::LeafRun();
+
+    shareLayout(comm, head);
+    std::vector<Write> writes;
+    if (rank == 0) {
+        for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
+    }
+    std::vector<std::pair<std::uint64_t, std::string>> masks;
+    addRunWrites(comm, head, 0, encoded, summaries, masks, writes);
+    if (!opt.output.empty()) writeTogether(comm, opt.output, writes);
+    result.fileBytes = opt.output.empty() ? 0 : head.fileBytes;
+    result.leaves = leaves;
+    result.activeVoxels = activeVoxels;
+    if (activeVoxels == 0) {
+        result.warnings.push_back("the result has no surface (the inputs do not overlap as this "
+                                  "operation needs); the level set written is empty");
+    }
+
+    double times[3] = {readSeconds, computeSeconds, secondsSince(writeStart)};
+    MPI_Allreduce(MPI_IN_PLACE, times, 3, MPI_DOUBLE, MPI_MAX, comm);
+    result.readSeconds = times[0];
+    result.computeSeconds = times[1];
+    result.writeSeconds = times[2];
+    const std::uint64_t mineCounts[2] = {std::uint64_t(mineInOrder.size()), leavesRead};
+    std::vector<std::uint64_t> gathered(2 * std::size_t(size));
+    MPI_Allgather(mineCounts, 2, MPI_UINT64_T, gathered.data(), 2, MPI_UINT64_T, comm);
+    for (int r = 0; r < size; ++r) {
+        result.rankNodes.push_back(gathered[2 * std::size_t(r)]);
+        result.rankLeavesRead.push_back(gathered[2 * std::size_t(r) + 1]);
+        result.rankLeaves.push_back(summaries[std::size_t(r)].leaves);
+        result.rankActiveVoxels.push_back(summaries[std::size_t(r)].activeVoxels);
+    }
+    result.rankPeakMemory = gatherPeakMemory(comm);
+    double seconds = secondsSince(start);
+    MPI_Allreduce(MPI_IN_PLACE, &seconds, 1, MPI_DOUBLE, MPI_MAX, comm);
+    result.totalSeconds = seconds;
+    return result;
+}
+
+} // namespace ivdb::mpi

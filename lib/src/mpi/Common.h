@@ -1,0 +1,104 @@
+// SPDX-License-Identifier: Apache-2.0
+// What ivdb-mpi's commands share: errors raised on every rank at once, large messages, and one
+// file written by every rank (MPI-IO) from the MPI-free pieces (io::FileHead, io::LeafRun).
+#pragma once
+
+#include <ivdb/io/VdbPieces.h>
+#include <ivdb/util/System.h>
+
+#include <openvdb/openvdb.h>
+
+#include <mpi.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <exception>
+#include <string>
+#include <vector>
+
+namespace ivdb::mpi::detail {
+
+using Clock = std::chrono::steady_clock;
+
+inline double secondsSince(Clock::time_point t)
+{
+    return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+int rankOf(MPI_Comm comm);
+int sizeOf(MPI_Comm comm);
+
+/// Raise @a error (empty: none) from this rank on every rank of @a comm: the lowest failing
+/// rank's (rank 0 and that rank rethrow their own, so its type and parameter survive), others a
+/// RuntimeError with its message.
+void raiseTogether(MPI_Comm comm, std::exception_ptr error, const std::string& message);
+
+/// Run @a step on every rank of @a comm; if it threw on any rank, throw on every rank (see
+/// raiseTogether).
+template<typename Fn>
+void collective(MPI_Comm comm, Fn&& step)
+{
+    std::exception_ptr error;
+    std::string message;
+    try {
+        step();
+    } catch (const std::exception& e) {
+        error = std::current_exception();
+        message = util::errorText(e);
+    } catch (...) {
+        error = std::current_exception();
+        message = "unknown failure";
+    }
+    raiseTogether(comm, error, message);
+}
+
+/// Point-to-point messages of any size (MPI counts are ints: pieces of 1 GiB).
+void sendBlob(MPI_Comm comm, int to, int tag, const void* data, std::uint64_t bytes);
+void recvBlob(MPI_Comm comm, int from, int tag, void* data, std::uint64_t bytes);
+
+/// What each rank tells the others of one grid's run of leaves, before rank 0 gathers the
+/// run's table entries.
+struct RunSummary
+{
+    std::uint64_t leaves = 0, bytes = 0, activeVoxels = 0;
+    std::int32_t box[6] = {0, 0, 0, -1, -1, -1};
+    std::int32_t hasSizes = 0;
+};
+
+/// Every rank's summary of its run of one grid (in rank order).
+std::vector<RunSummary> gatherSummaries(MPI_Comm comm, const io::LeafRun& run);
+
+/// On rank 0, the table entries, active voxels and box of every rank's run of one grid,
+/// joined in rank order (the others send theirs and get an empty run). Collective.
+io::LeafRun gatherEntries(MPI_Comm comm, const io::LeafRun& mine,
+                          const std::vector<RunSummary>& summaries);
+
+/// Rank 0's head's layout (each grid's offset, head size and mask runs; not the head's bytes)
+/// on every rank. Collective.
+void shareLayout(MPI_Comm comm, io::FileHead& head);
+
+/// One positioned write of a rank.
+struct Write
+{
+    std::uint64_t offset;
+    const char* data;
+    std::uint64_t size;
+};
+
+/// The writes of this rank's run of grid @a grid of @a head: its leaves' masks into the
+/// topology (kept in @a masks) and its buffers after the runs of the ranks before it.
+void addRunWrites(MPI_Comm comm, const io::FileHead& head, std::size_t grid,
+                  const io::LeafRun& run, const std::vector<RunSummary>& summaries,
+                  std::vector<std::pair<std::uint64_t, std::string>>& masks,
+                  std::vector<Write>& writes);
+
+/// Every rank's writes into one temporary file in @a output's folder, renamed over @a output
+/// by rank 0 once all have written; on any failure the temporary file is removed and the
+/// output left as it was. Collective.
+void writeTogether(MPI_Comm comm, const std::string& output, const std::vector<Write>& writes);
+
+/// Every rank's peak resident memory (bytes), in rank order. Collective.
+std::vector<std::uint64_t> gatherPeakMemory(MPI_Comm comm);
+
+} // namespace ivdb::mpi::detail
