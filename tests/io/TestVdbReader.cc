@@ -289,4 +289,9 @@ TEST_F(TestVdbReader, PartialGridReadsTheTopologyAndOnlyTheLeavesAskedFor)
     EXPECT_THROW(damaged.checkValues({0, 1}), openvdb::ValueError);
     damaged.load({2});
     EXPECT_NO_THROW(damaged.checkValues({2}));
+    // Indices past the leaves, and loads after the file was let go, are the caller's mistakes.
+    EXPECT_THROW(damaged.load({damaged.leaves().size()}), openvdb::ValueError);
+    damaged.release();
+    EXPECT_THROW(damaged.load({3}), openvdb::ValueError);
+    EXPECT_NO_THROW(damaged.checkValues({2}));
 }

@@ -238,6 +238,7 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
                     ASSERT_EQ(fileHead.grids.size(), 1u) << what;
                     const std::string& headBytes = fileHead.grids[0].bytes;
                     EXPECT_EQ(fileHead.fileBytes, headBytes.size() + body.size()) << what;
+                    EXPECT_EQ(fileHead.grids[0].size, headBytes.size()) << what;
                     std::string head(headBytes.size(), '\0');
                     std::vector<int> writes(head.size(), 0);
                     const auto put = [&](std::uint64_t at, const char* data, std::uint64_t n) {

@@ -291,6 +291,8 @@ class TestMpiDifferentiate(MpiCase):
         self.same_bytes("gradient", self.sphere, "--magnitude", "--with-input")
         self.same_bytes("gradient", self.union, "--step", "12", "--compression", "zip", "--half",
                           ranks=(2, 3))
+        # A half-float input copied as it is stored.
+        self.same_bytes("gradient", self.union, "--with-input", ranks=(3,))
         self.same_bytes("gradient", self.openvdb, "--with-input", ranks=(3,))
         self.same_bytes("gradient", self.openvdb, "--grid", "ball", "--step", "20",
                           "--compression", "none", ranks=(4,))
@@ -366,6 +368,7 @@ class TestMpiCsg(MpiCase):
                   "far": ('{"type": "sphere", "center": [5, 5, 5], "radius": 0.5}',
                           ["--voxel-size", "0.004"]),
                   "coarse": ('{"type": "sphere", "radius": 0.9}', ["--voxel-size", "0.01"])}
+        scenes["halfbig"] = (scenes["big"][0], scenes["big"][1] + ["--half"])
         for name, (shape, options) in scenes.items():
             scene = os.path.join(cls.dir, name + ".json")
             with open(scene, "w") as f:
@@ -394,6 +397,8 @@ class TestMpiCsg(MpiCase):
         self.csg("difference", "big", "torus", "wide", ranks=(2, 4))
         self.csg("intersection", "wide", "big", "small", options=("--compression", "zip", "--half"),
                  ranks=(3,))
+        # A first input stored as half floats: the result keeps them, as plain ivdb's does.
+        self.csg("union", "halfbig", "small", ranks=(1, 3))
 
     def test_an_empty_result_is_written_with_a_warning(self):
         self.csg("intersection", "big", "far", ranks=(1, 3))
@@ -426,6 +431,7 @@ class TestMpiCsg(MpiCase):
         self.assertIn("resamples", message)
         self.assertIn("--grid", self.errors(["csg", "union", big, big, "-o", "OUT", "--grid", "x"]))
         self.assertIn("--fog", self.errors(["csg", "union", big, big, "-o", "OUT", "--fog"]))
+        self.assertIn("not expected", self.errors(["csg", "union", big, big, "-o", "OUT", "--fog"]))
         self.assertIn("unknown command", self.errors(["blend", "union", big, big, "-o", "OUT",
                                                       "-p", "10"]))
 

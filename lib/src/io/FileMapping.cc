@@ -42,6 +42,14 @@ FileMapping::FileMapping(const std::string& path)
     ::close(fd);
 }
 
+void FileMapping::release(std::uint64_t from, std::uint64_t to) const
+{
+    const std::uint64_t page = std::uint64_t(::sysconf(_SC_PAGESIZE));
+    to = std::min(to, mSize);
+    const std::uint64_t a = (from + page - 1) / page * page, b = to / page * page;
+    if (mData && b > a) ::madvise(const_cast<char*>(mData) + a, b - a, MADV_DONTNEED);
+}
+
 FileMapping::~FileMapping()
 {
     if (mData) ::munmap(const_cast<char*>(mData), mSize);

@@ -24,6 +24,11 @@ public:
     const char* data() const { return mData; }
     std::uint64_t size() const { return mSize; }
 
+    /// Let the whole pages of [from, to) go from this process's resident memory: they stay in
+    /// the page cache, and reading them again maps them back. For a reader that needs only
+    /// part of a file after passing over all of it (io::PartialGrid).
+    void release(std::uint64_t from, std::uint64_t to) const;
+
 private:
     const char* mData = nullptr;
     std::uint64_t mSize = 0;

@@ -32,7 +32,7 @@ class LayoutReader
 {
 public:
     LayoutReader(const std::string& path, const FileMapping& file)
-        : mPath(path), mData(file.data()), mSize(file.size()) {}
+        : mPath(path), mFile(file), mData(file.data()), mSize(file.size()) {}
 
     std::uint64_t pos() const { return mPos; }
 
@@ -40,7 +40,11 @@ public:
     {
         if (pos > mSize) corrupt("an offset points past the end of the file");
         mPos = pos;
+        dropBehind();
     }
+
+    /// Let the pages passed go from memory as the walk goes on (FileMapping::release).
+    void releaseBehind() { mRelease = true; }
 
     void bytes(void* out, std::uint64_t n, std::uint64_t end)
     {
@@ -49,6 +53,7 @@ public:
         }
         std::memcpy(out, mData + mPos, n);
         mPos += n;
+        dropBehind();
     }
 
     void skip(std::uint64_t n, std::uint64_t end)
@@ -213,9 +218,21 @@ public:
     }
 
 private:
+    /// With releaseBehind(): every 64 MB walked forward, let the pages behind go.
+    void dropBehind()
+    {
+        constexpr std::uint64_t kChunk = std::uint64_t(64) << 20;
+        if (!mRelease || mPos < mReleased + kChunk) return;
+        mFile.release(mReleased, mPos);
+        mReleased = mPos;
+    }
+
     std::string mPath;
+    const FileMapping& mFile;
     const char* mData;
     std::uint64_t mSize, mPos = 0, mDelayedLoadAt = 0;
+    bool mRelease = false;
+    std::uint64_t mReleased = 0;
 };
 
 /// What the root node's records of a tree type look like ("Tree_float_5_4_3", with an optional
@@ -562,11 +579,12 @@ GridLayout checkGrid(LayoutReader& in, const GridRecord& d, std::uint64_t end, b
 
 } // namespace
 
-FileLayout validateLayout(const std::string& path, const FileMapping& file)
+FileLayout validateLayout(const std::string& path, const FileMapping& file, bool releaseBehind)
 {
     const std::uint64_t size = file.size();
     if (size == 0) ioError(path, "is empty, not a .vdb file");
     LayoutReader in(path, file);
+    if (releaseBehind) in.releaseBehind();
     FileLayout result;
     std::int64_t magic = 0;
     if (size < 8) ioError(path, "is too short to be a .vdb file");

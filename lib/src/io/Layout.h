@@ -38,7 +38,10 @@ struct FileLayout
 /// delayed-load table. OpenVDB's reader accepts some truncations and allocates whatever a
 /// damaged count claims; every count here is bounded by the bytes that part of the file may use.
 /// @param file  the file's bytes
+/// @param releaseBehind  let the pages walked go from the process's memory as the walk goes on
+///                       (for a reader that then reads only part of the file)
 /// @throw openvdb::IoError naming @a path and what is wrong
-FileLayout validateLayout(const std::string& path, const FileMapping& file);
+FileLayout validateLayout(const std::string& path, const FileMapping& file,
+                          bool releaseBehind = false);
 
 } // namespace ivdb::io

@@ -394,7 +394,8 @@ PartialGrid::PartialGrid(const std::string& path, const std::string& name)
     m.path = path;
     checkReadable(path);
     m.file = std::make_unique<FileMapping>(path);
-    m.layout = validateLayout(path, *m.file);
+    // The layout check walks the whole file; this process keeps only the pages it reads later.
+    m.layout = validateLayout(path, *m.file, /*releaseBehind=*/true);
     m.state.library = openvdb::VersionId(m.layout.libraryMajor, m.layout.libraryMinor);
     m.state.fileVersion = m.layout.fileVersion;
     // The grids without their trees, in the order readVdb() gives them, to pick one as
@@ -430,6 +431,7 @@ PartialGrid::PartialGrid(const std::string& path, const std::string& name)
     try {
         m.grid = openvdb::gridPtrCast<openvdb::FloatGrid>(readGridHead(g, *m.file, m.state, true));
         m.leaves = leavesInFileOrder(*m.grid, g);
+        m.file->release(0, m.file->size());
     } catch (const std::exception& e) {
         ioError(path, "not a readable .vdb file: " + util::errorText(e));
     }
@@ -444,12 +446,21 @@ const std::vector<PartialGrid::LeafT*>& PartialGrid::leaves() const { return mIm
 void PartialGrid::load(const std::vector<std::uint64_t>& indices)
 {
     Impl& m = *mImpl;
+    if (!m.file) OPENVDB_THROW(openvdb::ValueError, m.path + " was released");
+    for (std::uint64_t i : indices) {
+        if (i >= m.leaves.size()) {
+            OPENVDB_THROW(openvdb::ValueError, "leaf " + std::to_string(i) + " of a grid of " +
+                          std::to_string(m.leaves.size()));
+        }
+    }
     try {
         readLeaves(*m.grid, m.layout.grids[m.index], *m.file, m.state, &indices);
     } catch (const std::exception& e) {
         ioError(m.path, "not a readable .vdb file: " + util::errorText(e));
     }
 }
+
+void PartialGrid::release() { mImpl->file.reset(); }
 
 void PartialGrid::checkValues(const std::vector<std::uint64_t>& indices) const
 {

@@ -971,6 +971,7 @@ FileHead vdbFileHead(const std::vector<HeadGrid>& input, const openvdb::MetaMap&
             OPENVDB_THROW(openvdb::ValueError, "grid '" + grids[g]->getName() + "' is a " +
                           grids[g]->valueType() + " grid; the pieces are float or vec3s grids");
         }
+        part.size = part.bytes.size();
         at = part.buffersAt() + in.bufferBytes;
         result.grids.push_back(std::move(part));
     }

@@ -69,6 +69,7 @@ openvdb::FloatGrid::Ptr ownPart(io::PartialGrid& part, const std::set<Coord>& mi
         if (mine.count(leaves[i]->origin() & ~(Int1T::DIM - 1))) indices.push_back(i);
     }
     part.load(indices);
+    part.release();
     part.checkValues(indices);
     leavesRead += indices.size();
     const openvdb::FloatGrid::Ptr grid = part.grid();
@@ -181,17 +182,21 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     const double computeSeconds = secondsSince(start) - readSeconds;
     const auto writeStart = Clock::now();
 
-    // What each of its nodes became; the others' (placeholders) are dropped.
+    // What each of its nodes became; the others' (placeholders) are dropped. The leaves move
+    // to a grid of their own, with the result's half-float flag (the first input's), to be
+    // encoded.
     std::vector<NodeReport> reports;
     std::vector<NodeTable> tables;
-    openvdb::FloatGrid::Ptr own = openvdb::FloatGrid::create(combined->background());
-    own->setGridClass(openvdb::GRID_LEVEL_SET);
-    {
+    io::LeafRun encoded;
+    collective(comm, [&] {
+        openvdb::FloatGrid::Ptr own = openvdb::FloatGrid::create(combined->background());
+        own->setGridClass(openvdb::GRID_LEVEL_SET);
+        own->setSaveFloatAsHalf(combined->saveFloatAsHalf());
         TreeT& tree = combined->tree();
         for (const Coord& o : mineInOrder) {
             NodeReport r;
             for (int a = 0; a < 3; ++a) r.origin[a] = o[a];
-            if (const Int1T* n = tree.probeConstNode<Int1T>(o)) {
+            if (Int1T* n = tree.probeNode<Int1T>(o)) {
                 r.isNode = 1;
                 NodeTable t;
                 t.children = n->getChildMask();
@@ -199,7 +204,10 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
                 for (openvdb::Index i = 0; i < Int1T::NUM_VALUES; ++i) {
                     t.tiles[i] = t.children.isOn(i) ? 0.0f : n->getValue(n->offsetToGlobalCoord(i));
                 }
-                for (auto it = n->cbeginChildOn(); it; ++it) own->tree().addLeaf(new LeafT(*it));
+                // The leaves move; active tiles keep their places (for rank 0's skeleton).
+                std::vector<Coord> leaves;
+                for (auto it = n->cbeginChildOn(); it; ++it) leaves.push_back(it.getCoord());
+                for (const Coord& c : leaves) own->tree().addLeaf(n->stealNode<LeafT>(c, 0.0f, true));
                 tables.push_back(t);
             } else {
                 r.tile = tree.getValue(o);
@@ -207,29 +215,40 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
             }
             reports.push_back(r);
         }
-    }
-    io::LeafRun encoded;
-    collective(comm, [&] { encoded = io::encodeLeafRun(*own, opt.write); });
-    own.reset();
+        tree.clearAllAccessors();
+        encoded = io::encodeLeafRun(*own, opt.write);
+    });
+    if (rank != 0) combined.reset();
     const std::vector<RunSummary> summaries = gatherSummaries(comm, encoded);
     io::LeafRun all = gatherEntries(comm, encoded, summaries);
     encoded.codes.clear();
     encoded.sizes.clear();
 
     // Rank 0: every rank's nodes into its own result's nodes and tiles (right everywhere but on
-    // the other ranks' nodes), pruned as OpenVDB prunes a level set, and the file's head.
+    // the other ranks' nodes), pruned as OpenVDB prunes a level set, and the file's head. It
+    // makes room for the reports first, so that no rank waits on a rank 0 that failed.
     std::uint64_t counts[2] = {reports.size(), tables.size()};
     std::vector<std::uint64_t> allCounts(2 * std::size_t(size));
     MPI_Allgather(counts, 2, MPI_UINT64_T, allCounts.data(), 2, MPI_UINT64_T, comm);
+    std::size_t reportAt = reports.size(), tableAt = tables.size();
+    collective(comm, [&] {
+        if (rank != 0) return;
+        std::uint64_t r = 0, t = 0;
+        for (int k = 0; k < size; ++k) {
+            r += allCounts[2 * std::size_t(k)];
+            t += allCounts[2 * std::size_t(k) + 1];
+        }
+        reports.resize(r);
+        tables.resize(t);
+    });
     io::FileHead head;
     if (rank == 0) {
-        for (int r = 1; r < size; ++r) {
-            std::vector<NodeReport> rr(allCounts[2 * std::size_t(r)]);
-            std::vector<NodeTable> rt(allCounts[2 * std::size_t(r) + 1]);
-            recvBlob(comm, r, 5, rr.data(), rr.size() * sizeof(NodeReport));
-            recvBlob(comm, r, 6, rt.data(), rt.size() * sizeof(NodeTable));
-            reports.insert(reports.end(), rr.begin(), rr.end());
-            tables.insert(tables.end(), rt.begin(), rt.end());
+        for (int k = 1; k < size; ++k) {
+            const std::uint64_t nr = allCounts[2 * std::size_t(k)], nt = allCounts[2 * std::size_t(k) + 1];
+            recvBlob(comm, k, 5, reports.data() + reportAt, nr * sizeof(NodeReport));
+            recvBlob(comm, k, 6, tables.data() + tableAt, nt * sizeof(NodeTable));
+            reportAt += nr;
+            tableAt += nt;
         }
     } else {
         sendBlob(comm, 0, 5, reports.data(), reports.size() * sizeof(NodeReport));
@@ -276,7 +295,7 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     if (rank == 0) {
         for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
     }
-    std::vector<std::pair<std::uint64_t, std::string>> masks;
+    std::deque<std::pair<std::uint64_t, std::string>> masks;
     addRunWrites(comm, head, 0, encoded, summaries, masks, writes);
     if (!opt.output.empty()) writeTogether(comm, opt.output, writes);
     result.fileBytes = opt.output.empty() ? 0 : head.fileBytes;

@@ -94,31 +94,38 @@ std::vector<RunSummary> gatherSummaries(MPI_Comm comm, const io::LeafRun& run)
 io::LeafRun gatherEntries(MPI_Comm comm, const io::LeafRun& mine,
                           const std::vector<RunSummary>& summaries)
 {
+    // Rank 0 makes room for every entry first, so that no rank waits on a rank 0 that failed.
     io::LeafRun all;
+    bool sized = false; // with a codec: the same on every rank that holds leaves
+    for (const RunSummary& h : summaries) sized = sized || h.hasSizes;
+    collective(comm, [&] {
+        if (rankOf(comm) != 0) return;
+        std::uint64_t leaves = 0;
+        for (const RunSummary& h : summaries) leaves += h.leaves;
+        all.codes.resize(leaves);
+        if (sized) all.sizes.resize(leaves);
+    });
     if (rankOf(comm) != 0) {
         sendBlob(comm, 0, 2, mine.codes.data(), mine.codes.size());
-        if (!mine.sizes.empty()) {
-            sendBlob(comm, 0, 4, mine.sizes.data(), mine.sizes.size() * sizeof(std::int64_t));
-        }
+        if (sized) sendBlob(comm, 0, 4, mine.sizes.data(), mine.sizes.size() * sizeof(std::int64_t));
         return all;
     }
-    all.codes = mine.codes;
-    all.sizes = mine.sizes;
-    all.activeVoxels = mine.activeVoxels;
-    all.activeBox = mine.activeBox;
-    for (std::size_t r = 1; r < summaries.size(); ++r) {
+    std::uint64_t at = 0;
+    for (std::size_t r = 0; r < summaries.size(); ++r) {
         const RunSummary& h = summaries[r];
-        io::LeafRun run;
-        run.codes.resize(h.leaves);
-        if (h.hasSizes) run.sizes.resize(h.leaves);
-        recvBlob(comm, int(r), 2, run.codes.data(), h.leaves);
-        if (h.hasSizes) recvBlob(comm, int(r), 4, run.sizes.data(), h.leaves * sizeof(std::int64_t));
-        run.activeVoxels = h.activeVoxels;
-        if (h.box[3] >= h.box[0]) {
-            run.activeBox = openvdb::CoordBBox(openvdb::Coord(h.box[0], h.box[1], h.box[2]),
-                                               openvdb::Coord(h.box[3], h.box[4], h.box[5]));
+        if (r == 0) {
+            std::copy(mine.codes.begin(), mine.codes.end(), all.codes.begin());
+            if (sized) std::copy(mine.sizes.begin(), mine.sizes.end(), all.sizes.begin());
+        } else {
+            recvBlob(comm, int(r), 2, all.codes.data() + at, h.leaves);
+            if (sized) recvBlob(comm, int(r), 4, all.sizes.data() + at, h.leaves * sizeof(std::int64_t));
         }
-        all.appendEntries(run);
+        at += h.leaves;
+        all.activeVoxels += h.activeVoxels;
+        if (h.box[3] >= h.box[0]) {
+            all.activeBox.expand(openvdb::CoordBBox(openvdb::Coord(h.box[0], h.box[1], h.box[2]),
+                                                    openvdb::Coord(h.box[3], h.box[4], h.box[5])));
+        }
     }
     return all;
 }
@@ -131,11 +138,10 @@ void shareLayout(MPI_Comm comm, io::FileHead& head)
     MPI_Bcast(&head.fileBytes, 1, MPI_UINT64_T, 0, comm);
     static_assert(sizeof(io::FileHead::MaskRun) == 3 * sizeof(std::uint64_t), "plain data");
     for (io::FileHead::Grid& g : head.grids) {
-        std::uint64_t v[3] = {g.at, g.bytes.size(), g.maskRuns.size()};
+        std::uint64_t v[3] = {g.at, g.size, g.maskRuns.size()};
         MPI_Bcast(v, 3, MPI_UINT64_T, 0, comm);
         g.at = v[0];
-        // Only the size of the head's bytes matters off rank 0 (where the buffers start).
-        if (rankOf(comm) != 0) g.bytes.assign(v[1], '\0');
+        g.size = v[1]; // the bytes stay on rank 0, which writes them
         g.maskRuns.resize(v[2]);
         MPI_Bcast(g.maskRuns.data(), int(v[2] * 3), MPI_UINT64_T, 0, comm);
     }
@@ -143,7 +149,7 @@ void shareLayout(MPI_Comm comm, io::FileHead& head)
 
 void addRunWrites(MPI_Comm comm, const io::FileHead& head, std::size_t grid,
                   const io::LeafRun& run, const std::vector<RunSummary>& summaries,
-                  std::vector<std::pair<std::uint64_t, std::string>>& masks,
+                  std::deque<std::pair<std::uint64_t, std::string>>& masks,
                   std::vector<Write>& writes)
 {
     const int rank = rankOf(comm);

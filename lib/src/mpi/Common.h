@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <deque>
 #include <cstdint>
 #include <exception>
 #include <string>
@@ -87,10 +88,11 @@ struct Write
 };
 
 /// The writes of this rank's run of grid @a grid of @a head: its leaves' masks into the
-/// topology (kept in @a masks) and its buffers after the runs of the ranks before it.
+/// topology (kept in @a masks, whose elements stay in place as more are added) and its buffers
+/// after the runs of the ranks before it.
 void addRunWrites(MPI_Comm comm, const io::FileHead& head, std::size_t grid,
                   const io::LeafRun& run, const std::vector<RunSummary>& summaries,
-                  std::vector<std::pair<std::uint64_t, std::string>>& masks,
+                  std::deque<std::pair<std::uint64_t, std::string>>& masks,
                   std::vector<Write>& writes);
 
 /// Every rank's writes into one temporary file in @a output's folder, renamed over @a output

@@ -131,6 +131,7 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
     collective(comm, [&] {
         leavesReadIndices = leavesRead(*part, first, count, job.reach, job.axesOnly);
         part->load(leavesReadIndices);
+        part->release();
         part->checkValues(runIndices);
     });
     const std::uint64_t read = leavesReadIndices.size();
@@ -143,13 +144,14 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
     std::vector<openvdb::GridBase::Ptr> outputs;
     collective(comm, [&] { outputs = job.compute(*grid, only); });
     const double computeSeconds = secondsSince(start) - readSeconds;
-    if (job.withInput) {
+    collective(comm, [&] {
+        if (!job.withInput) return;
         auto in = openvdb::FloatGrid::create(grid->background());
         in->setGridClass(grid->getGridClass());
         in->setSaveFloatAsHalf(grid->saveFloatAsHalf());
         for (const LeafT* leaf : only) in->tree().addLeaf(new LeafT(*leaf));
         outputs.push_back(in);
-    }
+    });
     // The input's values are no longer needed (the input's run, if written, is a copy).
     for (std::uint64_t i : leavesReadIndices) {
         LeafT::Buffer values(openvdb::PartialCreate(), 0.0f); // holds nothing
@@ -210,7 +212,7 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
     if (rank == 0) {
         for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
     }
-    std::vector<std::pair<std::uint64_t, std::string>> masks;
+    std::deque<std::pair<std::uint64_t, std::string>> masks;
     for (std::size_t g = 0; g < runs.size(); ++g) {
         addRunWrites(comm, head, g, runs[g], summaries[g], masks, writes);
     }
@@ -224,11 +226,16 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
     result.writeSeconds = times[2];
     for (const RunSummary& s : summaries[0]) {
         result.activeVoxels += s.activeVoxels;
-        result.rankLeaves.push_back(s.leaves);
         result.rankActiveVoxels.push_back(s.activeVoxels);
     }
-    result.rankLeavesRead.assign(std::size_t(size), 0);
-    MPI_Allgather(&read, 1, MPI_UINT64_T, result.rankLeavesRead.data(), 1, MPI_UINT64_T, comm);
+    // Per rank: the input's leaves it computed (its run, empty leaves included) and read.
+    const std::uint64_t mine[2] = {count, read};
+    std::vector<std::uint64_t> counts(2 * std::size_t(size));
+    MPI_Allgather(mine, 2, MPI_UINT64_T, counts.data(), 2, MPI_UINT64_T, comm);
+    for (int r = 0; r < size; ++r) {
+        result.rankLeaves.push_back(counts[2 * std::size_t(r)]);
+        result.rankLeavesRead.push_back(counts[2 * std::size_t(r) + 1]);
+    }
     result.rankPeakMemory = gatherPeakMemory(comm);
     double total = secondsSince(start);
     MPI_Allreduce(MPI_IN_PLACE, &total, 1, MPI_DOUBLE, MPI_MAX, comm);
@@ -255,7 +262,7 @@ DifferentiateResult gradient(MPI_Comm comm, const jobs::GradientOptions& opt)
 {
     Job job = jobFor(opt);
     job.axesOnly = true;
-    const int step = std::max(1, opt.step);
+    const int step = std::min(std::max(1, opt.step), diff::kMaxStep); // checked in run()
     job.reach = (step + int(LeafT::DIM) - 1) / int(LeafT::DIM);
     job.checkOptions = [&opt] { check(limits::kStep, opt.step); };
     job.compute = [&opt](const openvdb::FloatGrid& phi, const diff::LeafList& only) {

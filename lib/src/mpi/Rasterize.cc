@@ -217,7 +217,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     if (rank == 0) {
         for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
     }
-    std::vector<std::pair<std::uint64_t, std::string>> masks;
+    std::deque<std::pair<std::uint64_t, std::string>> masks;
     addRunWrites(comm, head, 0, encoded, summaries, masks, writes);
     if (!opt.output.empty()) writeTogether(comm, opt.output, writes);
     result.fileBytes = opt.output.empty() ? 0 : head.fileBytes;

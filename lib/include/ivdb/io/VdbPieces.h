@@ -60,10 +60,12 @@ struct FileHead
     struct Grid
     {
         std::uint64_t at = 0;          ///< where the head starts in the file
-        std::string bytes;             ///< the head
+        std::uint64_t size = 0;        ///< the head's length
+        /// The head (size bytes; a process that only writes leaves may leave it empty).
+        std::string bytes;
         std::vector<MaskRun> maskRuns; ///< in file order; they cover every leaf of the grid once
         /// Where the grid's leaf buffers start: right after its head.
-        std::uint64_t buffersAt() const { return at + bytes.size(); }
+        std::uint64_t buffersAt() const { return at + size; }
     };
 
     std::vector<Grid> grids;     ///< in file order
@@ -168,6 +170,10 @@ public:
     /// Read the values of the leaves @a indices (file order) in parallel.
     /// @throw openvdb::IoError naming the file if a leaf's voxel data is damaged
     void load(const std::vector<std::uint64_t>& indices);
+
+    /// Let go of the file (its mapping, whose pages count as the process's memory): no more
+    /// load() after this.
+    void release();
 
     /// Check what checkGridValues() checks, on the background, the tiles and the leaves
     /// @a indices (which must have been loaded): every rank checks its own leaves.

@@ -43,9 +43,9 @@ struct CsgResult
 /// write the file as rasterize() does.
 /// Collective: call it on every rank with the same options.
 /// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own): the
-/// errors of jobs::combine(); ParamError for a blend (p or k) or a fog volume, which plain ivdb
-/// makes, and for inputs on different transforms (plain ivdb resamples them); openvdb::ValueError
-/// for a level set with active tiles. Nothing is written on any error.
+/// errors of jobs::combine(); ParamError for a blend (p or k), which plain ivdb makes, and for
+/// inputs on different transforms (plain ivdb resamples them); openvdb::ValueError for a fog
+/// volume (plain ivdb's) and for a level set with active tiles. Nothing is written on any error.
 CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& options);
 
 } // namespace ivdb::mpi

@@ -23,8 +23,9 @@ struct DifferentiateResult
     double computeSeconds = 0.0;       ///< the stencils (the slowest rank)
     double writeSeconds = 0.0;         ///< encoding, gathering and writing the file
     double totalSeconds = 0.0;
-    /// Per rank: leaves computed, leaves read (those and their neighbours within the stencil's
-    /// reach), active voxels computed, and peak resident memory (bytes).
+    /// Per rank: the input's leaves computed (its run, empty ones included), leaves read (those
+    /// and their neighbours within the stencil's reach), active voxels computed, and peak
+    /// resident memory (bytes).
     std::vector<std::uint64_t> rankLeaves, rankLeavesRead, rankActiveVoxels, rankPeakMemory;
 };
 
