@@ -31,6 +31,31 @@ int worldRank()
     return rank;
 }
 
+/// A column of --json's per-rank list: its name and one figure per rank.
+using RankColumn = std::pair<const char*, const std::vector<std::uint64_t>*>;
+
+/// Print @a out as --json, with `per_rank`: for each of @a ranks ranks, its number and the
+/// columns' figures.
+void printJson(nlohmann::json out, int ranks, const std::vector<RankColumn>& columns)
+{
+    nlohmann::json rows = nlohmann::json::array();
+    for (int k = 0; k < ranks; ++k) {
+        nlohmann::json row{{"rank", k}};
+        for (const auto& [name, values] : columns) row[name] = (*values)[std::size_t(k)];
+        rows.push_back(row);
+    }
+    out["per_rank"] = rows;
+    std::printf("%s\n", out.dump(2).c_str());
+}
+
+/// The largest of the ranks' peak memories.
+std::uint64_t largest(const std::vector<std::uint64_t>& perRank)
+{
+    std::uint64_t peak = 0;
+    for (std::uint64_t m : perRank) peak = std::max(peak, m);
+    return peak;
+}
+
 struct RasterizeArgs
 {
     jobs::RasterizeOptions job;
@@ -38,21 +63,14 @@ struct RasterizeArgs
     bool quiet = false, perRank = false, json = false;
 };
 
-void printJson(const RasterizeArgs& a, const mpi::RasterizeResult& r)
+void printRasterizeJson(const RasterizeArgs& a, const mpi::RasterizeResult& r)
 {
     nlohmann::json out{{"scene", a.job.scene}, {"output", a.job.output}, {"ranks", r.ranks},
                        {"leaves", r.leaves}, {"active_voxels", r.activeVoxels},
                        {"file_bytes", r.fileBytes}, {"compute_seconds", r.computeSeconds},
                        {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds}};
-    nlohmann::json ranks = nlohmann::json::array();
-    for (int k = 0; k < r.ranks; ++k) {
-        const std::size_t i = std::size_t(k);
-        ranks.push_back({{"rank", k}, {"leaves", r.rankLeaves[i]},
-                         {"active_voxels", r.rankActiveVoxels[i]},
-                         {"peak_memory_bytes", r.rankPeakMemory[i]}});
-    }
-    out["per_rank"] = ranks;
-    std::printf("%s\n", out.dump(2).c_str());
+    printJson(out, r.ranks, {{"leaves", &r.rankLeaves}, {"active_voxels", &r.rankActiveVoxels},
+                             {"peak_memory_bytes", &r.rankPeakMemory}});
 }
 
 int runRasterize(RasterizeArgs& a)
@@ -72,12 +90,11 @@ int runRasterize(RasterizeArgs& a)
     progress->clearLine();
     printNotes(r.notes);
     if (a.json) {
-        printJson(a, r);
+        printRasterizeJson(a, r);
         return 0;
     }
     if (a.quiet) return 0;
-    std::uint64_t peak = 0;
-    for (std::uint64_t m : r.rankPeakMemory) peak = std::max(peak, m);
+    const std::uint64_t peak = largest(r.rankPeakMemory);
     std::printf("%s: %llu active voxels on %d ranks, file %s, peak memory per rank up to %s, "
                 "compute %.3f s, write %.3f s, total %.3f s -> %s\n",
                 a.job.scene.c_str(), (unsigned long long)r.activeVoxels, r.ranks,
@@ -147,21 +164,13 @@ void printDiff(const DiffPrint& p, const std::string& what, const std::string& i
                            {"active_voxels", r.activeVoxels}, {"file_bytes", r.fileBytes},
                            {"read_seconds", r.readSeconds}, {"compute_seconds", r.computeSeconds},
                            {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds}};
-        nlohmann::json ranks = nlohmann::json::array();
-        for (int k = 0; k < r.ranks; ++k) {
-            const std::size_t i = std::size_t(k);
-            ranks.push_back({{"rank", k}, {"leaves", r.rankLeaves[i]},
-                             {"leaves_read", r.rankLeavesRead[i]},
-                             {"active_voxels", r.rankActiveVoxels[i]},
-                             {"peak_memory_bytes", r.rankPeakMemory[i]}});
-        }
-        out["per_rank"] = ranks;
-        std::printf("%s\n", out.dump(2).c_str());
+        printJson(out, r.ranks, {{"leaves", &r.rankLeaves}, {"leaves_read", &r.rankLeavesRead},
+                                 {"active_voxels", &r.rankActiveVoxels},
+                                 {"peak_memory_bytes", &r.rankPeakMemory}});
         return;
     }
     if (p.quiet) return;
-    std::uint64_t peak = 0;
-    for (std::uint64_t m : r.rankPeakMemory) peak = std::max(peak, m);
+    const std::uint64_t peak = largest(r.rankPeakMemory);
     std::printf("%s: %s of '%s', %llu active voxels on %d ranks, file %s, peak memory per rank "
                 "up to %s, read %.3f s, compute %.3f s, write %.3f s, total %.3f s -> %s\n",
                 input.c_str(), what.c_str(), r.gridName.c_str(),
@@ -248,21 +257,13 @@ void printCsg(const CsgArgs& a, const mpi::CsgResult& r)
                            {"active_voxels", r.activeVoxels}, {"file_bytes", r.fileBytes},
                            {"read_seconds", r.readSeconds}, {"compute_seconds", r.computeSeconds},
                            {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds}};
-        nlohmann::json ranks = nlohmann::json::array();
-        for (int k = 0; k < r.ranks; ++k) {
-            const std::size_t i = std::size_t(k);
-            ranks.push_back({{"rank", k}, {"nodes", r.rankNodes[i]},
-                             {"leaves_read", r.rankLeavesRead[i]}, {"leaves", r.rankLeaves[i]},
-                             {"active_voxels", r.rankActiveVoxels[i]},
-                             {"peak_memory_bytes", r.rankPeakMemory[i]}});
-        }
-        out["per_rank"] = ranks;
-        std::printf("%s\n", out.dump(2).c_str());
+        printJson(out, r.ranks, {{"nodes", &r.rankNodes}, {"leaves_read", &r.rankLeavesRead},
+                                 {"leaves", &r.rankLeaves}, {"active_voxels", &r.rankActiveVoxels},
+                                 {"peak_memory_bytes", &r.rankPeakMemory}});
         return;
     }
     if (a.quiet) return;
-    std::uint64_t peak = 0;
-    for (std::uint64_t m : r.rankPeakMemory) peak = std::max(peak, m);
+    const std::uint64_t peak = largest(r.rankPeakMemory);
     std::printf("csg %s of %zu level sets: %llu active voxels on %d ranks, file %s, peak memory "
                 "per rank up to %s, read %.3f s, combine %.3f s, write %.3f s, total %.3f s -> "
                 "%s\n",

@@ -290,15 +290,7 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     });
     all = io::LeafRun();
 
-    shareLayout(comm, head);
-    std::vector<Write> writes;
-    if (rank == 0) {
-        for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
-    }
-    std::deque<std::pair<std::uint64_t, std::string>> masks;
-    addRunWrites(comm, head, 0, encoded, summaries, masks, writes);
-    if (!opt.output.empty()) writeTogether(comm, opt.output, writes);
-    result.fileBytes = opt.output.empty() ? 0 : head.fileBytes;
+    result.fileBytes = writeFile(comm, opt.output, head, {&encoded}, {summaries});
     result.leaves = leaves;
     result.activeVoxels = activeVoxels;
     if (activeVoxels == 0) {

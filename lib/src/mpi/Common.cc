@@ -234,6 +234,25 @@ void writeTogether(MPI_Comm comm, const std::string& output, const std::vector<W
     }
 }
 
+std::uint64_t writeFile(MPI_Comm comm, const std::string& output, io::FileHead& head,
+                        const std::vector<const io::LeafRun*>& runs,
+                        const std::vector<std::vector<RunSummary>>& summaries)
+{
+    // Every rank learns where the masks go in the heads, and where its buffers go after them.
+    shareLayout(comm, head);
+    std::vector<Write> writes;
+    if (rankOf(comm) == 0) {
+        for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
+    }
+    std::deque<std::pair<std::uint64_t, std::string>> masks;
+    for (std::size_t g = 0; g < runs.size(); ++g) {
+        addRunWrites(comm, head, g, *runs[g], summaries[g], masks, writes);
+    }
+    if (output.empty()) return 0;
+    writeTogether(comm, output, writes);
+    return head.fileBytes;
+}
+
 std::vector<std::uint64_t> gatherPeakMemory(MPI_Comm comm)
 {
     const std::uint64_t peak = util::peakResidentMemory();

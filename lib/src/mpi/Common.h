@@ -100,6 +100,13 @@ void addRunWrites(MPI_Comm comm, const io::FileHead& head, std::size_t grid,
 /// output left as it was. Collective.
 void writeTogether(MPI_Comm comm, const std::string& output, const std::vector<Write>& writes);
 
+/// Write the file of @a head (rank 0's; every rank learns its layout) and of every rank's runs
+/// of its grids, @a runs[g] with @a summaries[g] for grid g, to @a output (nothing if empty).
+/// Returns the file's size (0 if not written). Collective.
+std::uint64_t writeFile(MPI_Comm comm, const std::string& output, io::FileHead& head,
+                        const std::vector<const io::LeafRun*>& runs,
+                        const std::vector<std::vector<RunSummary>>& summaries);
+
 /// Every rank's peak resident memory (bytes), in rank order. Collective.
 std::vector<std::uint64_t> gatherPeakMemory(MPI_Comm comm);
 

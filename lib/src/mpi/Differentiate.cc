@@ -207,17 +207,9 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
     });
     entries.clear();
 
-    shareLayout(comm, head);
-    std::vector<Write> writes;
-    if (rank == 0) {
-        for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
-    }
-    std::deque<std::pair<std::uint64_t, std::string>> masks;
-    for (std::size_t g = 0; g < runs.size(); ++g) {
-        addRunWrites(comm, head, g, runs[g], summaries[g], masks, writes);
-    }
-    if (!job.output.empty()) writeTogether(comm, job.output, writes);
-    result.fileBytes = job.output.empty() ? 0 : head.fileBytes;
+    std::vector<const io::LeafRun*> runPointers;
+    for (const io::LeafRun& r : runs) runPointers.push_back(&r);
+    result.fileBytes = writeFile(comm, job.output, head, runPointers, summaries);
 
     double times[3] = {readSeconds, computeSeconds, secondsSince(writeStart)};
     MPI_Allreduce(MPI_IN_PLACE, times, 3, MPI_DOUBLE, MPI_MAX, comm);

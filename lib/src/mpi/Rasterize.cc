@@ -211,16 +211,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     all = io::LeafRun();
     result.activeVoxels = activeVoxels;
 
-    // Every rank learns where the masks go in the head, and where its buffers go after it.
-    shareLayout(comm, head);
-    std::vector<Write> writes;
-    if (rank == 0) {
-        for (const auto& p : head.nonMaskParts()) writes.push_back({p.offset, p.data, p.size});
-    }
-    std::deque<std::pair<std::uint64_t, std::string>> masks;
-    addRunWrites(comm, head, 0, encoded, summaries, masks, writes);
-    if (!opt.output.empty()) writeTogether(comm, opt.output, writes);
-    result.fileBytes = opt.output.empty() ? 0 : head.fileBytes;
+    result.fileBytes = writeFile(comm, opt.output, head, {&encoded}, {summaries});
     result.writeSeconds = secondsSince(writeStart);
 
     result.rankPeakMemory = gatherPeakMemory(comm);
