@@ -376,6 +376,16 @@ class TestMpiCsg(MpiCase):
             r = ivdb("rasterize", scene, "-o", os.path.join(cls.dir, name + ".vdb"), "-q", *options)
             assert r.returncode == 0, r.stderr
 
+        # Inside tiles that are not -background (OpenVDB keeps whatever tile values a file
+        # holds) in 128^3 nodes that also hold leaves: sent whole to rank 0, not as signs.
+        import pyopenvdb as vdb
+        grid = vdb.read(os.path.join(cls.dir, "big.vdb"), "surface")
+        half = -0.5 * grid.background
+        for x in (-232, -224):  # inside the big sphere, near its surface, outside "small"
+            grid.fill((x, 0, 0), (x + 7, 7, 7), half, active=False)
+        assert grid.getAccessor().getValue((-228, 3, 3)) == half
+        vdb.write(os.path.join(cls.dir, "odd.vdb"), grids=[grid])
+
     @classmethod
     def tearDownClass(cls):
         shutil.rmtree(cls.dir, ignore_errors=True)
@@ -399,6 +409,11 @@ class TestMpiCsg(MpiCase):
                  ranks=(3,))
         # A first input stored as half floats: the result keeps them, as plain ivdb's does.
         self.csg("union", "halfbig", "small", ranks=(1, 3))
+        out = self.csg("union", "odd", "small", ranks=(1, 3))
+        import pyopenvdb as vdb
+        odd = vdb.read(self.path("odd.vdb"), "surface")
+        self.assertEqual(vdb.read(out, "surface").getAccessor().getValue((-228, 3, 3)),
+                         -0.5 * odd.background)
 
     def test_an_empty_result_is_written_with_a_warning(self):
         self.csg("intersection", "big", "far", ranks=(1, 3))

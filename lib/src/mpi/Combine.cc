@@ -50,12 +50,45 @@ struct NodeReport
     float tile = 0.0f;
 };
 
-/// A 128^3 node's slots as sent: the child (leaf) and value masks and every slot's value.
+/// A 128^3 node's slots as sent: the child (leaf) and value (active) masks, and the tiles'
+/// values: inside (-background) where @a inside is on, else the background, when every tile is
+/// one of the two (a level set's are, after pruning); otherwise all of them, in a NodeValues.
 struct NodeTable
 {
-    Int1T::NodeMaskType children, values;
+    Int1T::NodeMaskType children, values, inside;
+    std::int64_t full = -1; ///< the index of its NodeValues, or -1
+};
+
+struct NodeValues
+{
     float tiles[Int1T::NUM_VALUES];
 };
+
+/// @a items of every rank, on rank 0 in rank order (others: emptied); returns how many each
+/// rank had. Rank 0 makes room first, inside a collective, so that no rank waits on a rank 0
+/// that failed. Collective.
+template<typename T>
+std::vector<std::uint64_t> gatherOnRoot(MPI_Comm comm, std::vector<T>& items, int tag)
+{
+    const int rank = rankOf(comm), size = sizeOf(comm);
+    std::uint64_t mine = items.size();
+    std::vector<std::uint64_t> counts(std::size_t(size), 0);
+    MPI_Allgather(&mine, 1, MPI_UINT64_T, counts.data(), 1, MPI_UINT64_T, comm);
+    std::uint64_t total = 0;
+    for (std::uint64_t c : counts) total += c;
+    collective(comm, [&] { if (rank == 0) items.resize(total); });
+    if (rank == 0) {
+        std::uint64_t at = counts[0];
+        for (int k = 1; k < size; ++k) {
+            recvBlob(comm, k, tag, items.data() + at, counts[std::size_t(k)] * sizeof(T));
+            at += counts[std::size_t(k)];
+        }
+    } else {
+        sendBlob(comm, 0, tag, items.data(), items.size() * sizeof(T));
+        items = std::vector<T>();
+    }
+    return counts;
+}
 
 /// The rank's share of the inputs: each input's tree with every 128^3 node not in @a mine
 /// replaced by an active tile (so that no node above it is pruned on this partial view; the
@@ -187,6 +220,7 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     // encoded.
     std::vector<NodeReport> reports;
     std::vector<NodeTable> tables;
+    std::vector<NodeValues> values;
     io::LeafRun encoded;
     collective(comm, [&] {
         openvdb::FloatGrid::Ptr own = openvdb::FloatGrid::create(combined->background());
@@ -201,8 +235,18 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
                 NodeTable t;
                 t.children = n->getChildMask();
                 t.values = n->getValueMask();
+                NodeValues v;
+                const float bg = combined->background();
+                bool signs = true;
                 for (openvdb::Index i = 0; i < Int1T::NUM_VALUES; ++i) {
-                    t.tiles[i] = t.children.isOn(i) ? 0.0f : n->getValue(n->offsetToGlobalCoord(i));
+                    v.tiles[i] = t.children.isOn(i) ? 0.0f : n->getValue(n->offsetToGlobalCoord(i));
+                    if (t.children.isOn(i)) continue;
+                    signs = signs && (v.tiles[i] == bg || v.tiles[i] == -bg);
+                    if (v.tiles[i] == -bg) t.inside.setOn(i);
+                }
+                if (!signs) {
+                    t.full = std::int64_t(values.size());
+                    values.push_back(v);
                 }
                 // The leaves move; active tiles keep their places (for rank 0's skeleton).
                 std::vector<Coord> leaves;
@@ -225,36 +269,20 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     encoded.sizes.clear();
 
     // Rank 0: every rank's nodes into its own result's nodes and tiles (right everywhere but on
-    // the other ranks' nodes), pruned as OpenVDB prunes a level set, and the file's head. It
-    // makes room for the reports first, so that no rank waits on a rank 0 that failed.
-    std::uint64_t counts[2] = {reports.size(), tables.size()};
-    std::vector<std::uint64_t> allCounts(2 * std::size_t(size));
-    MPI_Allgather(counts, 2, MPI_UINT64_T, allCounts.data(), 2, MPI_UINT64_T, comm);
-    std::size_t reportAt = reports.size(), tableAt = tables.size();
-    collective(comm, [&] {
-        if (rank != 0) return;
-        std::uint64_t r = 0, t = 0;
-        for (int k = 0; k < size; ++k) {
-            r += allCounts[2 * std::size_t(k)];
-            t += allCounts[2 * std::size_t(k) + 1];
-        }
-        reports.resize(r);
-        tables.resize(t);
-    });
+    // the other ranks' nodes), pruned as OpenVDB prunes a level set, and the file's head.
+    gatherOnRoot(comm, reports, 5);
+    const std::vector<std::uint64_t> tableCounts = gatherOnRoot(comm, tables, 6);
+    const std::vector<std::uint64_t> valueCounts = gatherOnRoot(comm, values, 7);
     io::FileHead head;
     if (rank == 0) {
-        for (int k = 1; k < size; ++k) {
-            const std::uint64_t nr = allCounts[2 * std::size_t(k)], nt = allCounts[2 * std::size_t(k) + 1];
-            recvBlob(comm, k, 5, reports.data() + reportAt, nr * sizeof(NodeReport));
-            recvBlob(comm, k, 6, tables.data() + tableAt, nt * sizeof(NodeTable));
-            reportAt += nr;
-            tableAt += nt;
+        // Each rank's tables point into its own values: now into everyone's.
+        std::uint64_t table = 0, base = 0;
+        for (int k = 0; k < size; ++k) {
+            for (std::uint64_t i = 0; i < tableCounts[std::size_t(k)]; ++i, ++table) {
+                if (tables[table].full >= 0) tables[table].full += std::int64_t(base);
+            }
+            base += valueCounts[std::size_t(k)];
         }
-    } else {
-        sendBlob(comm, 0, 5, reports.data(), reports.size() * sizeof(NodeReport));
-        sendBlob(comm, 0, 6, tables.data(), tables.size() * sizeof(NodeTable));
-        reports.clear();
-        tables.clear();
     }
     std::uint64_t activeVoxels = 0, bufferBytes = 0, leaves = 0;
     for (const RunSummary& s : summaries) {
@@ -275,11 +303,15 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
                 continue;
             }
             const NodeTable& t = tables[table++];
-            tree.addTile(1, o, t.tiles[0], t.values.isOn(0)); // makes the node
+            const float bg = skeleton->background();
+            const auto tile = [&](openvdb::Index i) {
+                return t.full >= 0 ? values[std::size_t(t.full)].tiles[i] : t.inside.isOn(i) ? -bg : bg;
+            };
+            tree.addTile(1, o, tile(0), t.values.isOn(0)); // makes the node
             Int1T* n = tree.probeNode<Int1T>(o);
             for (openvdb::Index i = 0; i < Int1T::NUM_VALUES; ++i) {
                 if (t.children.isOn(i)) n->addTile(i, 0.0f, true); // a leaf
-                else n->addTile(i, t.tiles[i], t.values.isOn(i));
+                else n->addTile(i, tile(i), t.values.isOn(i));
             }
         }
         openvdb::tools::pruneLevelSet(tree);
