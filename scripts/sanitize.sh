@@ -61,9 +61,9 @@ configure() { # DIR SANITIZERS [extra cmake args]
     -DIVDB_BUILD_TESTS=ON -DIVDB_BUILD_BENCHMARKS=OFF "$@" >/dev/null
 }
 
-# Usual times here, in seconds (docs/reliability.md#ci-time): the ASan build 650 and suite 500,
+# Usual times here, in seconds (docs/reliability.md#ci-time): the ASan build 650 and suite 600,
 # fuzzing 130, the TSan build 400 and suites 230.
-if [[ " $stages " == *" asan "* || " $stages " == *" fuzz "* ]] && fits "the ASan + UBSan stages" 1280; then
+if [[ " $stages " == *" asan "* || " $stages " == *" fuzz "* ]] && fits "the ASan + UBSan stages" 1250; then
   configure build-asan address,undefined -DIVDB_FUZZ=ON
   echo "sanitize [${SECONDS} s]: building with ASan + UBSan + libFuzzer instrumentation (build-asan/)" >&2
   build_start=$SECONDS
@@ -72,7 +72,7 @@ if [[ " $stages " == *" asan "* || " $stages " == *" fuzz "* ]] && fits "the ASa
   asan_built=1
 fi
 
-if [[ " $stages " == *" asan "* ]] && [ -n "${asan_built:-}" ] && fits "the ASan + UBSan suite" 630; then
+if [[ " $stages " == *" asan "* ]] && [ -n "${asan_built:-}" ] && fits "the ASan + UBSan suite" 600; then
   echo "sanitize [${SECONDS} s]: test suite under ASan + UBSan" >&2
   # The interop suites check file formats with outside programs, and the install test builds
   # docs/library.md against an installed package: the plain build runs both.
