@@ -56,12 +56,17 @@ void stampGrid(openvdb::GridBase& grid, const std::string& source)
     grid.insertMeta("ivdb_source", openvdb::StringMetadata(source));
 }
 
+openvdb::MetaMap fileStamp()
+{
+    openvdb::MetaMap meta;
+    meta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
+    return meta;
+}
+
 void writeVdbStamped(const std::string& path, const openvdb::GridCPtrVec& grids,
                      const WriteOptions& options)
 {
-    openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-    writeVdb(path, grids, fileMeta, options);
+    writeVdb(path, grids, fileStamp(), options);
 }
 
 GridInfo describeGrid(const openvdb::GridBase& grid)

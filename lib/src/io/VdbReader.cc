@@ -30,11 +30,11 @@
 
 #include <algorithm>
 #include <atomic>
-#include <cmath>
-#include <limits>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <string>
 
@@ -158,8 +158,7 @@ void decodeLeaf(LeafT& leaf, const char* p, const char* end, std::uint32_t compr
     }
 }
 
-/// Every leaf's voxel data, in parallel: each task reads a run of consecutive leaves through
-/// its own stream, so no state is shared but the (read-only) mapping.
+/// The grid's leaves in file order, one for each voxel data block the layout check found.
 template<typename GridT>
 std::vector<typename GridT::TreeType::LeafNodeType*>
 leavesInFileOrder(GridT& grid, const GridLayout& layout)
@@ -175,18 +174,19 @@ leavesInFileOrder(GridT& grid, const GridLayout& layout)
     return leaves;
 }
 
-/// The voxel data of the leaves @a only picks (indices in file order; null: every leaf).
+/// The voxel data of @a all (leavesInFileOrder()), or of the leaves @a only picks (indices
+/// into @a all), in parallel: each task reads a run of consecutive leaves through its own
+/// stream, so no state is shared but the (read-only) mapping.
 template<typename GridT>
-void readLeaves(GridT& grid, const GridLayout& layout, const FileMapping& file,
-                const StreamState& state, const std::vector<std::uint64_t>* only = nullptr)
+void readLeaves(GridT& grid, const std::vector<typename GridT::TreeType::LeafNodeType*>& all,
+                const GridLayout& layout, const FileMapping& file, const StreamState& state,
+                const std::vector<std::uint64_t>* only = nullptr)
 {
     using LeafT = typename GridT::TreeType::LeafNodeType;
-    const std::vector<LeafT*> all = leavesInFileOrder(grid, layout);
     std::vector<LeafT*> picked;
     std::vector<std::uint64_t> offsets;
     if (only) {
         for (std::uint64_t i : *only) {
-            if (i >= all.size()) OPENVDB_THROW(openvdb::ValueError, "no leaf " + std::to_string(i));
             picked.push_back(all[i]);
             offsets.push_back(layout.leaves[i]);
         }
@@ -266,7 +266,7 @@ openvdb::GridBase::Ptr readGridParallel(const GridLayout& layout, const FileMapp
     openvdb::GridBase::Ptr grid = readGridHead(layout, file, state, true);
     if (layout.parent.empty()) {
         const bool known = grid->apply<WalkedGrids>([&](auto& g) {
-            readLeaves(g, layout, file, state);
+            readLeaves(g, leavesInFileOrder(g, layout), layout, file, state);
         });
         if (!known) {
             OPENVDB_THROW(openvdb::IoError, "grid '" + layout.uniqueName + "' has type '" +
@@ -454,7 +454,7 @@ void PartialGrid::load(const std::vector<std::uint64_t>& indices)
         }
     }
     try {
-        readLeaves(*m.grid, m.layout.grids[m.index], *m.file, m.state, &indices);
+        readLeaves(*m.grid, m.leaves, m.layout.grids[m.index], *m.file, m.state, &indices);
     } catch (const std::exception& e) {
         ioError(m.path, "not a readable .vdb file: " + util::errorText(e));
     }

@@ -5,10 +5,8 @@
 
 #include "Common.h"
 
-#include <ivdb/Version.h>
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbPieces.h>
-#include <ivdb/levelset/LevelSet.h>
 #include <ivdb/ops/Csg.h>
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
@@ -139,20 +137,13 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
                                                  std::to_string(opt.inputs.size()));
         }
         if (opt.fog) {
-            OPENVDB_THROW(openvdb::ValueError, "a fog volume is made in one process (ivdb csg "
-                          "--fog, or ivdb convert of the level set ivdb-mpi writes)");
+            OPENVDB_THROW(openvdb::ValueError, "a fog volume is made in one process (plain ivdb's "
+                          "csg); ivdb-mpi writes the level set");
         }
         if (rank == 0 && !opt.output.empty()) io::checkOutputPath(opt.output);
         for (const std::string& path : opt.inputs) {
             parts.push_back(std::make_unique<io::PartialGrid>(path, opt.grid));
-            const openvdb::FloatGrid& g = *parts.back()->grid();
-            const std::string what = path + ": grid '" + g.getName() + "'";
-            levelset::checkLevelSet(g, what);
-            if (g.tree().hasActiveTiles()) {
-                OPENVDB_THROW(openvdb::ValueError, what + " has active tiles: ivdb-mpi reads "
-                              "level sets whose band is in leaves, as OpenVDB and ivdb write "
-                              "them; plain ivdb takes this one");
-            }
+            checkLevelSetInput(*parts.back(), path);
         }
         std::vector<openvdb::FloatGrid::Ptr> grids;
         for (const auto& p : parts) grids.push_back(p->grid());
@@ -316,9 +307,7 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
         }
         openvdb::tools::pruneLevelSet(tree);
         io::stampGrid(*skeleton, jobs::combineSource(opt));
-        openvdb::MetaMap fileMeta;
-        fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-        head = io::vdbFileHead(*skeleton, all, bufferBytes, fileMeta, opt.write);
+        head = io::vdbFileHead(*skeleton, all, bufferBytes, io::fileStamp(), opt.write);
     });
     all = io::LeafRun();
 

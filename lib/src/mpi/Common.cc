@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "Common.h"
 
+#include <ivdb/levelset/LevelSet.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -38,6 +40,18 @@ void raiseTogether(MPI_Comm comm, std::exception_ptr error, const std::string& t
     if (error) std::rethrow_exception(error);
     const std::string what = first == 0 ? message : "rank " + std::to_string(first) + ": " + message;
     OPENVDB_THROW(openvdb::RuntimeError, what);
+}
+
+void checkLevelSetInput(const io::PartialGrid& part, const std::string& path)
+{
+    const openvdb::FloatGrid& g = *part.grid();
+    const std::string what = path + ": grid '" + g.getName() + "'";
+    levelset::checkLevelSet(g, what);
+    if (g.tree().hasActiveTiles()) {
+        OPENVDB_THROW(openvdb::ValueError, what + " has active tiles: ivdb-mpi reads level sets "
+                      "whose band is in leaves, as the level-set tools of OpenVDB and ivdb make "
+                      "them; plain ivdb takes this one");
+    }
 }
 
 namespace {

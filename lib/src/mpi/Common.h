@@ -54,6 +54,11 @@ void collective(MPI_Comm comm, Fn&& step)
     raiseTogether(comm, error, message);
 }
 
+/// Refuse the grid @a part read from @a path unless it is a level set (levelset::checkLevelSet)
+/// whose band is in leaves: a level set with active tiles (which OpenVDB's and ivdb's level-set
+/// tools do not make) would need them voxelized across the ranks.
+void checkLevelSetInput(const io::PartialGrid& part, const std::string& path);
+
 /// Point-to-point messages of any size (MPI counts are ints: pieces of 1 GiB).
 void sendBlob(MPI_Comm comm, int to, int tag, const void* data, std::uint64_t bytes);
 void recvBlob(MPI_Comm comm, int from, int tag, void* data, std::uint64_t bytes);

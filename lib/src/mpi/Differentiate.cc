@@ -6,10 +6,8 @@
 
 #include "Common.h"
 
-#include <ivdb/Version.h>
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbPieces.h>
-#include <ivdb/levelset/LevelSet.h>
 #include <ivdb/util/Params.h>
 
 #include <openvdb/openvdb.h>
@@ -109,13 +107,7 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
         job.checkOptions();
         if (rank == 0 && !job.output.empty()) io::checkOutputPath(job.output);
         part = std::make_unique<io::PartialGrid>(job.input, job.grid);
-        const openvdb::FloatGrid& g = *part->grid();
-        levelset::checkLevelSet(g, job.input + ": grid '" + g.getName() + "'");
-        if (g.tree().hasActiveTiles()) {
-            OPENVDB_THROW(openvdb::ValueError, job.input + ": grid '" + g.getName() + "' has "
-                          "active tiles: ivdb-mpi reads level sets whose band is in leaves, as "
-                          "OpenVDB and ivdb write them; plain ivdb takes this one");
-        }
+        checkLevelSetInput(*part, job.input);
     });
     const openvdb::FloatGrid::Ptr grid = part->grid();
     result.gridName = grid->getName();
@@ -180,19 +172,18 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
         if (rank != 0) return;
         std::vector<openvdb::GridBase::ConstPtr> skeletons;
         for (std::size_t g = 0; g < outputs.size(); ++g) {
+            if (job.withInput && g + 1 == outputs.size()) { // the input, with its own metadata
+                skeletons.push_back(io::skeletonOf(*grid));
+                continue;
+            }
             openvdb::GridBase::Ptr skeleton;
-            if (job.withInput && g + 1 == outputs.size()) {
-                skeleton = io::skeletonOf(*grid);
-            } else if (outputs[g]->isType<openvdb::Vec3SGrid>()) {
+            if (outputs[g]->isType<openvdb::Vec3SGrid>()) {
                 skeleton = io::leafSkeleton<openvdb::Vec3SGrid>(grid->tree(), grid->transform(),
                                                                 openvdb::Vec3s(0.0f));
             } else {
                 skeleton = io::leafSkeleton<openvdb::FloatGrid>(grid->tree(), grid->transform(), 0.0f);
             }
-            if (!(job.withInput && g + 1 == outputs.size())) {
-                static_cast<openvdb::MetaMap&>(*skeleton) =
-                    static_cast<const openvdb::MetaMap&>(*outputs[g]);
-            }
+            static_cast<openvdb::MetaMap&>(*skeleton) = static_cast<const openvdb::MetaMap&>(*outputs[g]);
             skeletons.push_back(skeleton);
         }
         std::vector<io::HeadGrid> heads;
@@ -201,9 +192,7 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
             for (const RunSummary& s : summaries[g]) bytes += s.bytes;
             heads.push_back({skeletons[g], &entries[g], bytes});
         }
-        openvdb::MetaMap fileMeta;
-        fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-        head = io::vdbFileHead(heads, fileMeta, job.write);
+        head = io::vdbFileHead(heads, io::fileStamp(), job.write);
     });
     entries.clear();
 

@@ -6,7 +6,6 @@
 
 #include "Common.h"
 
-#include <ivdb/Version.h>
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbPieces.h>
 #include <ivdb/raster/Partition.h>
@@ -18,17 +17,13 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdio>
-#include <cstring>
 #include <exception>
-#include <filesystem>
 #include <memory>
 #include <sstream>
 #include <string>
 #include <thread>
 
 #include <sched.h>
-#include <unistd.h>
 
 namespace ivdb::mpi {
 
@@ -39,7 +34,7 @@ namespace {
 /// What each rank tells the others of its run before rank 0 gathers the leaves' fates.
 struct RunHeader
 {
-    std::uint64_t first = 0, count = 0, peakMemory = 0;
+    std::uint64_t first = 0, count = 0;
     std::uint64_t local = 0, searched = 0, approximate = 0;
     std::int32_t anyInside = 0;
     double computeSeconds = 0.0;
@@ -151,7 +146,6 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     RunHeader mine;
     mine.first = first;
     mine.count = count;
-    mine.peakMemory = util::peakResidentMemory();
     mine.local = built.stats.localDistances;
     mine.searched = built.stats.searchedDistances;
     mine.approximate = built.stats.approximateDistances;
@@ -204,9 +198,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
             jobs::throwNoVoxels(opt, settings);
         }
         jobs::stampRaster(*skeleton, opt, sc, settings);
-        openvdb::MetaMap fileMeta;
-        fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string("ivdb ") + kVersion));
-        head = io::vdbFileHead(*skeleton, all, bufferBytes, fileMeta, opt.write);
+        head = io::vdbFileHead(*skeleton, all, bufferBytes, io::fileStamp(), opt.write);
     });
     all = io::LeafRun();
     result.activeVoxels = activeVoxels;

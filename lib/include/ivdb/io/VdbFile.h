@@ -92,6 +92,9 @@ struct GridRef
 /// `ivdb_version` and `ivdb_source` (@a source: what it was made from) metadata.
 void stampGrid(openvdb::GridBase& grid, const std::string& source);
 
+/// @brief The file metadata ivdb writes: `creator` set to this ivdb version.
+openvdb::MetaMap fileStamp();
+
 /// @brief writeVdb() with the file's `creator` metadata set to this ivdb version.
 void writeVdbStamped(const std::string& path, const openvdb::GridCPtrVec& grids,
                      const WriteOptions& options = WriteOptions());
