@@ -64,7 +64,7 @@ BENCH = os.path.join(ROOT, "build", "bin", "ivdb_bench")
 def run(cmd):
     """Wall time (s) and peak RSS (MB) of one command."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=MPI_ENV)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     err = proc.stderr.read().decode()
@@ -218,6 +218,24 @@ def bench_sequence(tmp, reps):
     print(f"\nThe growing sphere by a shell loop of `vdb_tool -sphere ... -write`, one process a "
           f"frame: {t['grow_vdb_tool']:.2f} s; ivdb is **{t['grow_vdb_tool'] / t['grow_auto']:.2f}x "
           f"faster**.\n")
+    if not os.path.exists(IVDB_MPI):
+        return
+    # The same frames handed out to MPI ranks (each rank on cores / ranks threads).
+    cmds = {"ivdb": cmds["meta_auto"]}
+    for n in (1, 2, 4):
+        cmds[n] = ["mpirun", "--bind-to", "none", "--oversubscribe", "-np", str(n), IVDB_MPI,
+                   "rasterize", metaballs, "--frames", "1-48:2", "-o", out, "-q"]
+    t, m = median_runs(cmds, reps)
+    print(f"data/anim_metaballs.json, frames 1-48:2, handed out to `mpirun --bind-to none -np N "
+          f"ivdb-mpi rasterize` ranks on {os.cpu_count()} cores (wall time of mpirun, start-up "
+          f"included), medians of {reps} interleaved runs:\n")
+    print("| run | total | vs ivdb | largest peak memory of a process |")
+    print("|---|---|---|---|")
+    print(f"| ivdb (one process, frames at once) | {t['ivdb']:.2f} s | 1.00x | {m['ivdb']:.0f} MB |")
+    for n in (1, 2, 4):
+        print(f"| ivdb-mpi, {n} rank{'s' if n > 1 else ''} | {t[n]:.2f} s | {t['ivdb'] / t[n]:.2f}x | "
+              f"{m[n]:.0f} MB |")
+    print()
 
 
 IVDB_MPI = os.path.join(ROOT, "build", "bin", "ivdb-mpi")

@@ -451,5 +451,160 @@ class TestMpiCsg(MpiCase):
                                                       "-p", "10"]))
 
 
+class TestMpiSequence(MpiCase):
+    """A keyed scene's frames handed out to the ranks: the files plain ivdb writes, a line per
+    frame in frame order, --resume, a failing frame, an interruption."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.dir = tempfile.mkdtemp(prefix="ivdb-mpi-seq-")
+        # The report's blended spheres passing through each other, on a coarse lattice.
+        cls.scene = data("anim_metaballs.json")
+        cls.ivdb_dir = os.path.join(cls.dir, "ivdb")
+        os.mkdir(cls.ivdb_dir)
+        r = ivdb("rasterize", cls.scene, "--frames", "1-48:6", "--voxel-size", "0.03",
+                 "-o", os.path.join(cls.ivdb_dir, "m_####.vdb"))
+        assert r.returncode == 0, r.stderr
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.dir, ignore_errors=True)
+
+    FRAMES = list(range(1, 49, 6))
+
+    def expected(self, frame):
+        return masked(os.path.join(self.ivdb_dir, "m_%04d.vdb" % frame))
+
+    def sequence(self, ranks, *options, frames="1-48:6"):
+        out = os.path.join(self.dir, "r%d" % ranks)
+        os.makedirs(out, exist_ok=True)
+        r = mpi(ranks, "rasterize", self.scene, "--frames", frames, "--voxel-size", "0.03",
+                "-o", os.path.join(out, "m_####.vdb"), *options)
+        return r, out
+
+    def test_frames_equal_plain_ivdbs(self):
+        import json
+        for n in (1, 2, 3, 4):
+            r, out = self.sequence(n, "--json")
+            self.assertEqual(r.returncode, 0, r.stderr)
+            j = json.loads(r.stdout)
+            self.assertEqual(j["ranks"], n)
+            self.assertEqual(j["written"], len(self.FRAMES))
+            self.assertEqual([f["frame"] for f in j["frames"]], self.FRAMES, "in frame order")
+            self.assertTrue(all(0 <= f["rank"] < n for f in j["frames"]), j["frames"])
+            self.assertEqual(sum(x["frames"] for x in j["per_rank"]), len(self.FRAMES))
+            made = {f["rank"] for f in j["frames"]}
+            self.assertEqual(made, {x["rank"] for x in j["per_rank"] if x["frames"] > 0})
+            for frame in self.FRAMES:
+                path = os.path.join(out, "m_%04d.vdb" % frame)
+                self.assertEqual(masked(path), self.expected(frame), "frame %d on %d ranks" % (frame, n))
+                self.assertEqual(os.path.getsize(path), j["frames"][self.FRAMES.index(frame)]["file_bytes"])
+            self.assertEqual(sorted(os.listdir(out)), ["m_%04d.vdb" % f for f in self.FRAMES])
+        # The summary lines: one per frame, in frame order, naming the rank that made it.
+        r, out = self.sequence(3, "--per-rank")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        lines = [l for l in r.stdout.splitlines() if " frame " in l and "active voxels" in l]
+        self.assertEqual([int(l.split(" frame ")[1].split()[0]) for l in lines], self.FRAMES)
+        self.assertTrue(all("(rank " in l for l in lines), lines)
+        self.assertIn("%d frames written, 0 skipped on 3 ranks" % len(self.FRAMES), r.stdout)
+        self.assertEqual(len([l for l in r.stdout.splitlines() if l.startswith("  rank ")]), 3)
+
+    def test_resume_makes_only_the_missing_frames(self):
+        r, out = self.sequence(2)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        os.remove(os.path.join(out, "m_0013.vdb"))
+        with open(os.path.join(out, "m_0025.vdb"), "r+b") as f:
+            f.truncate(1000)  # cut short: not a whole frame, made again
+        r, out = self.sequence(2, "--resume", "--json")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        import json
+        j = json.loads(r.stdout)
+        self.assertEqual(j["written"], 2)
+        self.assertEqual(j["skipped"], len(self.FRAMES) - 2)
+        self.assertEqual([f["frame"] for f in j["frames"] if not f["skipped"]], [13, 25])
+        for frame in self.FRAMES:
+            self.assertEqual(masked(os.path.join(out, "m_%04d.vdb" % frame)), self.expected(frame))
+
+    def test_a_failing_frame_stops_the_handing_out(self):
+        # Frame 4 would need terabytes: refused when it is made. The frames written before stay
+        # whole; every rank fails with one message.
+        scene = self.path("grow.json")
+        with open(scene, "w") as f:
+            f.write('{"voxel_size": 0.04, "frames": {"start": 1, "end": 9}, "shape": {"type": '
+                    '"sphere", "radius": {"keys": [[1, 0.5], [4, 2000], [5, 0.5]], '
+                    '"interpolation": "step"}}}')
+        out = self.path("grow")
+        os.mkdir(out)
+        r = mpi(3, "rasterize", scene, "-o", os.path.join(out, "g_#.vdb"), "--parallel-frames", "1")
+        self.assertNotEqual(r.returncode, 0)
+        errors = [l for l in r.stderr.splitlines() if "error:" in l]
+        self.assertEqual(len(errors), 1, r.stderr)
+        self.assertIn("would need about", errors[0])
+        self.assertNotIn("g_4.vdb", os.listdir(out))
+        for name in os.listdir(out):
+            self.assertRegex(name, r"^g_\d\.vdb$")
+            want = self.path("want.vdb")
+            frame = int(name[2])
+            r = ivdb("rasterize", scene, "--frames", str(frame), "-o", want)
+            self.assertEqual(r.returncode, 0, r.stderr)
+            self.assertEqual(masked(os.path.join(out, name)), masked(want), name)
+
+    def test_an_interruption_leaves_whole_frames(self):
+        # SIGINT to mpirun, which passes SIGTERM to every rank, once frames are being written:
+        # each rank stops its frames, rank 0 says how many were written, every file is whole and
+        # no temporary file is left; --resume then finishes the sequence.
+        import signal
+        import time
+        out = self.path("stop")
+        os.mkdir(out)
+        args = ["mpirun", "--oversubscribe", "--bind-to", "none", "-np", "3", IVDB_MPI,
+                "rasterize", self.scene, "--voxel-size", "0.008", "-o",
+                os.path.join(out, "m_####.vdb")]
+        p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+        deadline = time.time() + 300
+        while len([n for n in os.listdir(out) if n.endswith(".vdb")]) < 2 and time.time() < deadline:
+            time.sleep(0.05)
+        p.send_signal(signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=120)
+        self.assertNotEqual(p.returncode, 0, stdout)
+        written = sorted(n for n in os.listdir(out))
+        self.assertLess(len(written), 48, "interrupted before the end")
+        self.assertGreaterEqual(len(written), 2)
+        self.assertIn("ivdb-mpi: error: interrupted; ", stderr)
+        self.assertIn(" of 48 frames are written whole", stderr)
+        self.assertEqual([n for n in written if not n.startswith("m_")], [], "temporary files left")
+        import pyopenvdb as vdb
+        for name in written:
+            grid = vdb.read(os.path.join(out, name), "surface")
+            self.assertGreater(grid.activeVoxelCount(), 0, name)
+        r = mpi(2, "rasterize", self.scene, "--voxel-size", "0.008", "--frames", "1-48:4", "--resume",
+                "-o", os.path.join(out, "m_####.vdb"), "--json")
+        self.assertEqual(r.returncode, 0, r.stderr)
+
+    def test_bad_input_fails_on_every_rank_and_writes_nothing(self):
+        scene = self.scene
+        self.assertIn("--frames", self.errors(["rasterize", scene, "-o", "OUT", "--frames", "3-1"]))
+        # Several frames need # in the output's name; a keyed scene needs frames to write.
+        message = self.errors(["rasterize", scene, "-o", "OUT", "--frames", "1-3"])
+        self.assertIn("needs #", message)
+        self.assertIn("--frames", self.errors(["rasterize", scene, "-o", "OUT"]))
+        self.assertIn("no keyed value", self.errors(["rasterize", data("sphere.json"), "-o", "OUT",
+                                                     "--frames", "1-3"]))
+        self.assertIn("--parallel-frames", self.errors(["rasterize", scene, "-o", "OUT",
+                                                        "--frames", "1", "--parallel-frames", "-1"]))
+        # A keyed value that is bad at one frame: checked before any frame is made.
+        bad = self.path("bad.json")
+        with open(bad, "w") as f:
+            f.write('{"voxel_size": 0.05, "shape": {"type": "sphere", "radius": '
+                    '{"keys": [[1, 0.5], [5, -1]]}}}')
+        out = self.path("bad")
+        os.mkdir(out)
+        r = mpi(3, "rasterize", bad, "--frames", "1-5", "-o", os.path.join(out, "b_#.vdb"))
+        self.assertNotEqual(r.returncode, 0)
+        self.assertEqual(len([l for l in r.stderr.splitlines() if "error:" in l]), 1, r.stderr)
+        self.assertIn("bad.json", r.stderr)
+        self.assertEqual(os.listdir(out), [])
+
+
 if __name__ == "__main__":
     unittest.main()

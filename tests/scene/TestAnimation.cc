@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -266,6 +267,70 @@ TEST_F(TestAnimation, AnInterruptionWhileFramesAreInFlightFreesTheirGrids)
             EXPECT_EQ(files, frames.size());
         }
     }
+    fs::remove_all(dir);
+}
+
+TEST_F(TestAnimation, AFrameSourceMakesOnlyTheFramesItHandsOut)
+{
+    // SequenceOptions::nextFrame, as ivdb::mpi's ranks share a sequence: only the frames handed
+    // out are made, each the same as in the whole sequence, reported as they finish; none makes
+    // nothing; a failing frame stops the source being asked.
+    const fs::path dir = fs::temp_directory_path() / ("ivdb-test-source-" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const std::string scenePath = (dir / "grow.json").string();
+    std::ofstream(scenePath) << R"({"voxel_size": 0.02, "frames": {"start": 1, "end": 12},
+        "shape": {"type": "sphere", "radius": {"keys": [[1, 0.3], [12, 0.6]]}}})";
+    std::map<int, std::uint64_t> whole;
+    jobs::SequenceOptions all;
+    all.base.scene = scenePath;
+    all.onFrame = [&](const jobs::FrameReport& f) { whole[f.frame] = f.result.activeVoxels; };
+    jobs::rasterizeSequence(all);
+    ASSERT_EQ(whole.size(), 12u);
+    EXPECT_EQ(jobs::sequenceFrames(all).size(), 12u);
+
+    for (const std::vector<std::size_t>& share : {std::vector<std::size_t>{1, 4, 7, 10},
+                                                 std::vector<std::size_t>{11, 0},
+                                                 std::vector<std::size_t>{}}) {
+        // Atomic: the pipeline's input stage runs on different threads, ordered by libtbb,
+        // which ThreadSanitizer does not see.
+        std::atomic<std::size_t> next{0};
+        std::set<int> made;
+        jobs::SequenceOptions opt = all;
+        opt.parallelFrames = 2;
+        opt.nextFrame = [&]() -> std::optional<std::size_t> {
+            const std::size_t i = next++;
+            if (i >= share.size()) return std::nullopt;
+            return share[i];
+        };
+        opt.framesDone = [] { return std::size_t(0); };
+        opt.onFrame = [&](const jobs::FrameReport& f) {
+            EXPECT_EQ(f.frame, int(f.index) + 1);
+            EXPECT_EQ(f.result.activeVoxels, whole[f.frame]) << "frame " << f.frame;
+            EXPECT_GT(f.peakMemory, 0u);
+            made.insert(f.frame);
+        };
+        const jobs::SequenceResult r = jobs::rasterizeSequence(opt);
+        std::set<int> want;
+        for (std::size_t i : share) want.insert(int(i) + 1);
+        EXPECT_EQ(made, want);
+        EXPECT_EQ(r.written, share.size());
+    }
+
+    // Frame 3 fails (the sphere inside out): the source is not asked for more after it.
+    const std::string badPath = (dir / "bad.json").string();
+    std::ofstream(badPath) << R"({"voxel_size": 0.02, "frames": {"start": 1, "end": 12},
+        "shape": {"type": "sphere", "radius": {"keys": [[1, 0.3], [3, 2000], [4, 0.3]],
+        "interpolation": "step"}}})";
+    jobs::SequenceOptions bad;
+    bad.base.scene = badPath;
+    bad.parallelFrames = 1;
+    std::atomic<std::size_t> asked{0};
+    bad.nextFrame = [&]() -> std::optional<std::size_t> {
+        const std::size_t i = asked++;
+        return i < 12 ? std::optional<std::size_t>(i) : std::nullopt;
+    };
+    EXPECT_THROW(jobs::rasterizeSequence(bad), openvdb::RuntimeError);
+    EXPECT_LE(asked.load(), 4u);
     fs::remove_all(dir);
 }
 

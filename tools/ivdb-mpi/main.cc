@@ -60,8 +60,54 @@ struct RasterizeArgs
 {
     jobs::RasterizeOptions job;
     std::string compression = "blosc", distance;
+    SequenceArgs seq;
     bool quiet = false, perRank = false, json = false;
 };
+
+/// A keyed scene's frames over the ranks: a line per frame (naming the rank that made it) in
+/// frame order as they finish, then the sequence's.
+int runSequenceMpi(RasterizeArgs& a, Progress& progress)
+{
+    jobs::SequenceOptions seq = a.seq.options(a.job);
+    nlohmann::json frames = nlohmann::json::array();
+    std::size_t done = 0;
+    seq.onFrame = [&](const jobs::FrameReport& f) {
+        progress.clearLine();
+        printFrame(a.job.scene, f, ++done, a.quiet || a.json,
+                   f.skipped ? "" : " (rank " + std::to_string(f.rank) + ")");
+        if (a.json) {
+            frames.push_back({{"frame", f.frame}, {"output", f.output}, {"skipped", f.skipped},
+                              {"rank", f.rank}, {"active_voxels", f.result.activeVoxels},
+                              {"file_bytes", f.result.fileBytes},
+                              {"compute_seconds", f.result.computeSeconds},
+                              {"total_seconds", f.result.totalSeconds},
+                              {"peak_memory_bytes", f.peakMemory}});
+        }
+    };
+    const mpi::SequenceResult r = mpi::rasterizeSequence(MPI_COMM_WORLD, seq);
+    if (worldRank() != 0) return 0;
+    if (a.json) {
+        nlohmann::json out{{"scene", a.job.scene}, {"output", a.job.output}, {"ranks", r.ranks},
+                           {"frames", frames}, {"written", r.written}, {"skipped", r.skipped},
+                           {"total_seconds", r.totalSeconds}};
+        printJson(out, r.ranks, {{"frames", &r.rankFrames}, {"peak_memory_bytes", &r.rankPeakMemory}});
+        return 0;
+    }
+    if (a.quiet) return 0;
+    std::printf("%zu frames written, %zu skipped on %d ranks, peak memory per rank up to %s, "
+                "total %.3f s\n", r.written, r.skipped, r.ranks,
+                util::formatBytes(double(largest(r.rankPeakMemory))).c_str(), r.totalSeconds);
+    if (a.perRank) {
+        for (int k = 0; k < r.ranks; ++k) {
+            const std::size_t i = std::size_t(k);
+            std::printf("  rank %d: %llu frames, peak memory %s\n", k,
+                        (unsigned long long)r.rankFrames[i],
+                        util::formatBytes(double(r.rankPeakMemory[i])).c_str());
+        }
+    }
+    std::fflush(stdout);
+    return 0;
+}
 
 void printRasterizeJson(const RasterizeArgs& a, const mpi::RasterizeResult& r)
 {
@@ -81,6 +127,12 @@ int runRasterize(RasterizeArgs& a)
         a.job.distance = a.distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
     }
     std::optional<Progress> progress;
+    if (a.seq.wanted(a.job.output)) {
+        // Every rank stops its frames on a signal (mpirun passes one to every rank).
+        progress.emplace("rasterize " + a.job.scene, printer);
+        a.job.interrupter = &*progress;
+        return runSequenceMpi(a, *progress);
+    }
     if (printer) {
         progress.emplace("rasterize " + a.job.scene);
         a.job.interrupter = &*progress;
@@ -127,15 +179,19 @@ void addRasterizeMpi(CLI::App& app, Action& action)
     auto a = std::make_shared<RasterizeArgs>();
     Command cmd(app, "rasterize",
         "Rasterize a JSON scene over the MPI ranks into one narrow-band level set .vdb (grid "
-        "'surface'): the file ivdb rasterize writes, every rank writing its part");
+        "'surface'): the file ivdb rasterize writes, every rank writing its part; a keyed "
+        "scene's frames are handed out to the ranks, each frame's file written by one");
     cmd.add("scene", a->job.scene, "Scene file (JSON; see docs/scene-format.md)")->required();
     cmd.add("-o,--output", a->job.output, "Output .vdb file (written by all ranks into a "
-            "temporary file that replaces it once all have written)", &param::kOutput)
+            "temporary file that replaces it once all have written); for a sequence, each run of "
+            "# becomes the zero-padded frame number (out_####.vdb)", &param::kOutput)
         ->required();
+    addSequenceOptions(cmd, a->seq);
     addRasterSettings(cmd, a->job, a->distance);
     addWriteOptions(cmd, a->compression, a->job.write.half);
     addQuietFlag(cmd, a->quiet);
-    cmd.flag("--per-rank", a->perRank, "Also print each rank's leaves, voxels and peak memory");
+    cmd.flag("--per-rank", a->perRank, "Also print each rank's leaves, voxels and peak memory "
+             "(for a sequence: frames made and peak memory)");
     cmd.flag("--json", a->json, "Print the summary as JSON, with every rank's figures (bytes)");
     cmd.onRun(action, [a]() { return runRasterize(*a); });
 }
@@ -338,7 +394,9 @@ int main(int argc, char** argv)
             ivdb::cli::addCsgMpi(app, action);
         };
         program.printsErrors = [rank] { return rank == 0; };
-        program.handlesSignals = rank == 0;
+        // Every rank: one being signalled outside an interruptible stretch removes the file it
+        // is writing (a frame of a sequence) before it ends; only rank 0 says so.
+        program.handlesSignals = true;
         code = ivdb::cli::run(argc, argv, program);
     }
     // Done (and any error printed): when a rank exits non-zero, mpirun stops the others, which

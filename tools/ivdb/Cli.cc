@@ -40,6 +40,7 @@ volatile std::sig_atomic_t gSignal = 0;
 // new note is complete before the handler can see it.
 constexpr std::size_t kNoteSize = 256;
 char gNotes[2][kNoteSize] = {"ivdb: error: interrupted; nothing was written\n"};
+bool gSilent = false; // another process of the run prints the errors
 std::atomic<const char*> gInterruptedMessage{gNotes[0]};
 
 [[noreturn]] void exitOnSignal(int sig)
@@ -104,7 +105,8 @@ void Command::onRun(Action& action, std::function<int()> work)
     });
 }
 
-Progress::Progress(std::string label): mLabel(std::move(label)), mTerminal(::isatty(2) == 1) {}
+Progress::Progress(std::string label, bool shown)
+    : mLabel(std::move(label)), mTerminal(shown && ::isatty(2) == 1) {}
 
 Progress::~Progress()
 {
@@ -144,13 +146,6 @@ void Progress::clearLine()
     std::fflush(stderr);
 }
 
-void setInterruptedNote(const std::string& note)
-{
-    char* next = gInterruptedMessage.load() == gNotes[0] ? gNotes[1] : gNotes[0];
-    std::snprintf(next, kNoteSize, "ivdb: error: interrupted; %s\n", note.c_str());
-    gInterruptedMessage = next;
-}
-
 namespace {
 
 /// The running program's name, for the lines it prints ("ivdb", "ivdb-mpi"); run() sets it.
@@ -161,6 +156,15 @@ std::string& programName()
 }
 
 } // namespace
+
+void setInterruptedNote(const std::string& note)
+{
+    char* next = gInterruptedMessage.load() == gNotes[0] ? gNotes[1] : gNotes[0];
+    if (gSilent) next[0] = '\0';
+    else std::snprintf(next, kNoteSize, "%s: error: interrupted; %s\n", programName().c_str(),
+                       note.c_str());
+    gInterruptedMessage = next;
+}
 
 void printNotes(const std::vector<std::string>& notes, const std::vector<std::string>& warnings)
 {
@@ -201,6 +205,66 @@ void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& d
             "it, without re-distancing (overrides the scene's \"distance\", default exact)",
             &param::kDistance)
         ->check(CLI::IsMember({"exact", "bound"}));
+}
+
+void addSequenceOptions(Command& cmd, SequenceArgs& seq)
+{
+    cmd.add("--frames", seq.frames, "Frames of a keyed scene to write, A-B[:STEP] or A (default: "
+            "the scene's \"frames\"); one .vdb per frame", &param::kFrames);
+    cmd.flag("--resume", seq.resume, "Skip frames whose file already reads as a whole frame");
+    cmd.add("--parallel-frames", seq.parallelFrames, "Frames made at once, in [0, 1024]; 0: as "
+            "many as there are threads, while their memory fits", &param::kParallelFrames)
+        ->capture_default_str();
+}
+
+bool SequenceArgs::wanted(const std::string& output) const
+{
+    return !frames.empty() || resume || parallelFrames != 0 || scene::hasFrameField(output);
+}
+
+jobs::SequenceOptions SequenceArgs::options(const jobs::RasterizeOptions& base) const
+{
+    jobs::SequenceOptions seq;
+    seq.base = base;
+    if (!frames.empty()) seq.frames = scene::parseFrameRange(frames);
+    seq.resume = resume;
+    seq.parallelFrames = parallelFrames;
+    return seq;
+}
+
+void printRasterSummary(const std::string& what, const jobs::RasterizeResult& r,
+                        const std::string& output, std::uint64_t peakMemory)
+{
+    std::printf("%s: %llu active voxels, grid %s, file %s, peak memory %s, compute %.3f s, "
+                "total %.3f s -> %s\n",
+                what.c_str(), (unsigned long long)r.activeVoxels,
+                util::formatBytes(double(r.gridBytes)).c_str(),
+                util::formatBytes(double(r.fileBytes)).c_str(),
+                util::formatBytes(double(peakMemory)).c_str(),
+                r.computeSeconds, r.totalSeconds, output.c_str());
+    const raster::RasterStats& st = r.stats;
+    if (st.searchedDistances + st.approximateDistances + st.sweptDistances > 0) {
+        std::printf("  true distances: %llu voxels by foot points, %llu by the lattice search "
+                    "(%llu of them approximate), %llu by fast sweeping\n",
+                    (unsigned long long)st.localDistances,
+                    (unsigned long long)(st.searchedDistances + st.approximateDistances),
+                    (unsigned long long)st.approximateDistances,
+                    (unsigned long long)st.sweptDistances);
+    }
+    std::fflush(stdout);
+}
+
+void printFrame(const std::string& scene, const jobs::FrameReport& f, std::size_t done,
+                bool quiet, const std::string& maker)
+{
+    printNotes(f.result.notes);
+    setInterruptedNote(std::to_string(done) + " of " + std::to_string(f.count) +
+                       " frames are written whole, the frames being made were not written; "
+                       "--resume carries on");
+    if (quiet) return;
+    const std::string what = scene + " frame " + std::to_string(f.frame) + maker;
+    if (f.skipped) std::printf("%s: already written, skipped -> %s\n", what.c_str(), f.output.c_str());
+    else printRasterSummary(what, f.result, f.output, f.peakMemory);
 }
 
 void addGradientOptions(Command& cmd, jobs::GradientOptions& job, std::string& compression)
@@ -276,6 +340,8 @@ std::pair<double, double> parseRange(const std::string& text)
 int run(int argc, char** argv, const Program& program)
 {
     programName() = program.name;
+    gSilent = !program.printsErrors();
+    setInterruptedNote("nothing was written");
     const std::string error = program.name + ": error: ";
     try {
         if (program.handlesSignals) installSignalHandlers();

@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
@@ -22,6 +23,9 @@ struct RasterizeOptions;
 struct GradientOptions;
 struct CurvatureOptions;
 struct CombineOptions;
+struct SequenceOptions;
+struct RasterizeResult;
+struct FrameReport;
 }
 
 namespace ivdb::cli {
@@ -113,7 +117,9 @@ void addPlan(CLI::App& app, Action& action);
 class Progress final: public util::Interrupter
 {
 public:
-    explicit Progress(std::string label);
+    /// @brief Polls signals; shows a percentage on a terminal unless @a shown is false (a
+    /// process whose lines another one prints).
+    explicit Progress(std::string label, bool shown = true);
     ~Progress() override;
     void start(const char* name = nullptr) override;
     void end() override;
@@ -145,6 +151,32 @@ void addWriteOptions(Command& cmd, std::string& compression, bool& half);
 /// (`ivdb rasterize`, `ivdb-mpi rasterize`), bound to @a job and @a distance ("exact" or
 /// "bound"; empty: the scene's).
 void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& distance);
+
+/// @brief The options of a keyed scene's sequence (`ivdb rasterize`, `ivdb-mpi rasterize`).
+struct SequenceArgs
+{
+    std::string frames;  ///< --frames: A-B[:STEP] or A
+    bool resume = false;
+    int parallelFrames = 0;
+
+    /// @brief True if the command line asks for a sequence (or names frame files, @a output).
+    bool wanted(const std::string& output) const;
+    /// @brief The sequence of the scene and settings of @a base.
+    jobs::SequenceOptions options(const jobs::RasterizeOptions& base) const;
+};
+
+/// @brief --frames, --resume and --parallel-frames, bound to @a seq.
+void addSequenceOptions(Command& cmd, SequenceArgs& seq);
+
+/// @brief rasterize's summary line for @a r (@a what: the scene, and the frame) written to
+/// @a output, with @a peakMemory, and how true distances were found.
+void printRasterSummary(const std::string& what, const jobs::RasterizeResult& r,
+                        const std::string& output, std::uint64_t peakMemory);
+
+/// @brief A sequence's frame: its notes and summary line (@a maker: who made it, appended to the
+/// frame's name), and what an interruption then says (@a done frames are written whole).
+void printFrame(const std::string& scene, const jobs::FrameReport& f, std::size_t done,
+                bool quiet, const std::string& maker = "");
 
 /// @brief The input, output and options of `gradient` (ivdb and ivdb-mpi), bound to @a job and
 /// @a compression.

@@ -160,12 +160,15 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
 RasterizeResult rasterize(const RasterizeOptions& opt)
 {
     const scene::Scene sc = loadRasterScene(opt, std::nullopt, true);
-    if (sc.animated) {
-        throw ParamError(param::kFrames, opt.scene + " has keyed values (an animation): choose "
-                         "the frames to write, with # in the output name where the frame number "
-                         "goes", "", ParamError::Kind::Missing);
-    }
+    if (sc.animated) throwAnimated(opt);
     return rasterizeScene(opt, sc, std::nullopt);
+}
+
+void throwAnimated(const RasterizeOptions& opt)
+{
+    throw ParamError(param::kFrames, opt.scene + " has keyed values (an animation): choose the "
+                     "frames to write, with # in the output name where the frame number goes",
+                     "", ParamError::Kind::Missing);
 }
 
 namespace {
@@ -175,24 +178,25 @@ namespace {
 class FrameProgress final: public util::Interrupter
 {
 public:
-    FrameProgress(util::Interrupter* outer, const std::atomic<std::size_t>& done, std::size_t count)
-        : mOuter(outer), mDone(done), mCount(count) {}
+    FrameProgress(util::Interrupter* outer, std::function<std::size_t()> done, std::size_t count)
+        : mOuter(outer), mDone(std::move(done)), mCount(count) {}
     void start(const char*) override {}
     void end() override {}
     bool wasInterrupted(int percent) override
     {
         const std::size_t share = percent < 0 ? 0 : std::size_t(percent);
-        const int overall = int(std::min<std::size_t>(99, (mDone.load() * 100 + share) / mCount));
+        const int overall = int(std::min<std::size_t>(99, (mDone() * 100 + share) / mCount));
         return util::wasInterrupted(mOuter, percent < 0 ? -1 : overall);
     }
 
 private:
     util::Interrupter* mOuter;
-    const std::atomic<std::size_t>& mDone;
+    std::function<std::size_t()> mDone;
     std::size_t mCount;
 };
 
-/// True if @a path already holds a frame: a .vdb that reads whole with a `surface` level set.
+} // namespace
+
 bool isWholeFrame(const std::string& path)
 {
     std::error_code ec;
@@ -206,7 +210,6 @@ bool isWholeFrame(const std::string& path)
     return false;
 }
 
-/// The frames to write, after checking that the scene animates them into distinct files.
 std::vector<int> sequenceFrames(const SequenceOptions& opt)
 {
     const RasterizeOptions& base = opt.base;
@@ -232,6 +235,8 @@ std::vector<int> sequenceFrames(const SequenceOptions& opt)
     return frames;
 }
 
+namespace {
+
 /// The frames of one sequence being made: each frame made on its own, reported in frame order.
 class Sequence
 {
@@ -252,7 +257,7 @@ public:
             ? std::string() : scene::frameFileName(mOpt.base.output, report.frame);
         report.skipped = mOpt.resume && !report.output.empty() && isWholeFrame(report.output);
         if (!report.skipped) {
-            FrameProgress progress(mOpt.base.interrupter, mDone, mFrames.size());
+            FrameProgress progress(mOpt.base.interrupter, framesDone(), mFrames.size());
             RasterizeOptions one = mOpt.base;
             one.output = report.output;
             one.interrupter = mOpt.base.interrupter ? &progress : nullptr;
@@ -264,13 +269,21 @@ public:
                 report.result.density.reset();
             }
         }
+        report.peakMemory = util::peakResidentMemory();
         ++mDone;
         std::lock_guard<std::mutex> lock(mMutex);
         mMade.emplace(i, std::move(report));
     }
 
-    /// Report every made frame whose predecessors are reported (all of them if @a all), one
-    /// caller at a time so the reports come in frame order.
+    /// The frames finished so far: the sequence's (when shared), else this one's.
+    std::function<std::size_t()> framesDone() const
+    {
+        if (mOpt.framesDone) return mOpt.framesDone;
+        return [this] { return mDone.load(); };
+    }
+
+    /// Report every made frame whose predecessors are reported (all of them if @a all, or if
+    /// frames come from nextFrame), one caller at a time so the reports come in frame order.
     void deliver(bool all = false)
     {
         std::lock_guard<std::mutex> delivering(mDeliver);
@@ -279,7 +292,7 @@ public:
             {
                 std::lock_guard<std::mutex> lock(mMutex);
                 auto it = mMade.begin();
-                if (it == mMade.end() || (!all && it->first != mNext)) return;
+                if (it == mMade.end() || (!all && !mOpt.nextFrame && it->first != mNext)) return;
                 report = std::move(it->second);
                 mMade.erase(it);
                 mNext = report.index + 1;
@@ -342,24 +355,33 @@ SequenceResult rasterizeSequence(const SequenceOptions& opt)
     check(limits::kParallelFrames, opt.parallelFrames);
     Sequence seq(opt, sequenceFrames(opt));
     util::InterruptScope scope(opt.base.interrupter, "rasterize frames");
+    // The frames in order, or from the caller's source. Called by one stage at a time; atomic
+    // because libtbb, which TSan does not see, orders that stage's runs on different threads.
+    std::atomic<std::size_t> next{0};
+    const auto nextFrame = [&]() -> std::optional<std::size_t> {
+        if (util::wasInterrupted(opt.base.interrupter)) return std::nullopt;
+        if (opt.nextFrame) return opt.nextFrame();
+        const std::size_t i = next++;
+        return i < seq.size() ? std::optional<std::size_t>(i) : std::nullopt;
+    };
     // A frame's serial stretches (reading the scene, opening, syncing and renaming its file)
     // leave cores idle, so several frames run at once (docs/performance.md#sequences); the
     // first runs alone to measure their memory.
     const std::uint64_t before = util::residentMemory();
-    seq.make(0);
-    seq.deliver();
+    const std::optional<std::size_t> first = nextFrame();
+    if (first) {
+        seq.make(*first);
+        seq.deliver();
+    }
     const std::uint64_t frameBytes = util::peakResidentMemory() - std::min(before, util::peakResidentMemory());
-    // Read by the serial input stage only; atomic because libtbb, which TSan does not see,
-    // orders that stage's runs on different threads.
-    std::atomic<std::size_t> next{1};
     try {
         const auto frames =
             tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
                 [&](tbb::flow_control& fc) -> std::size_t {
                     const FilterHandOver::Body body;
-                    const std::size_t i = next++;
-                    if (i >= seq.size() || util::wasInterrupted(opt.base.interrupter)) fc.stop();
-                    return i;
+                    const std::optional<std::size_t> i = nextFrame();
+                    if (!i) fc.stop();
+                    return i.value_or(0);
                 }) &
             tbb::make_filter<std::size_t, void>(tbb::filter_mode::parallel, [&](std::size_t i) {
                 const FilterHandOver::Body body;
@@ -377,7 +399,7 @@ SequenceResult rasterizeSequence(const SequenceOptions& opt)
                 });
             });
         gFilterHandOver.give();
-        tbb::parallel_pipeline(framesInFlight(opt.parallelFrames, frameBytes), frames);
+        if (first) tbb::parallel_pipeline(framesInFlight(opt.parallelFrames, frameBytes), frames);
         gFilterHandOver.collect();
     } catch (...) {
         gFilterHandOver.collect();

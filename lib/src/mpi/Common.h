@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <exception>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace ivdb::mpi::detail {
@@ -35,22 +36,29 @@ int sizeOf(MPI_Comm comm);
 /// RuntimeError with its message.
 void raiseTogether(MPI_Comm comm, std::exception_ptr error, const std::string& message);
 
+/// Run @a step and return what it threw (null if nothing), with its text in @a message.
+template<typename Fn>
+std::exception_ptr captured(Fn&& step, std::string& message)
+{
+    try {
+        step();
+    } catch (const std::exception& e) {
+        message = util::errorText(e);
+        return std::current_exception();
+    } catch (...) {
+        message = "unknown failure";
+        return std::current_exception();
+    }
+    return nullptr;
+}
+
 /// Run @a step on every rank of @a comm; if it threw on any rank, throw on every rank (see
 /// raiseTogether).
 template<typename Fn>
 void collective(MPI_Comm comm, Fn&& step)
 {
-    std::exception_ptr error;
     std::string message;
-    try {
-        step();
-    } catch (const std::exception& e) {
-        error = std::current_exception();
-        message = util::errorText(e);
-    } catch (...) {
-        error = std::current_exception();
-        message = "unknown failure";
-    }
+    const std::exception_ptr error = captured(std::forward<Fn>(step), message);
     raiseTogether(comm, error, message);
 }
 

@@ -76,11 +76,7 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
         }
         if (rank == 0 && !opt.output.empty()) io::checkOutputPath(opt.output);
         sc = jobs::loadRasterScene(opt);
-        if (sc.animated) {
-            OPENVDB_THROW(openvdb::RuntimeError, opt.scene + " has keyed values (an animation): "
-                          "ivdb-mpi rasterizes still scenes; plain ivdb writes its frames "
-                          "(ivdb rasterize --frames)");
-        }
+        if (sc.animated) jobs::throwAnimated(opt);
         settings = jobs::rasterSettings(sc, opt);
         if (rank != 0) settings.interrupter = nullptr;
         ownRaster = raster::isOwnRaster(sc.shape, settings);

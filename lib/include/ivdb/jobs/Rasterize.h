@@ -79,6 +79,10 @@ raster::RasterSettings rasterSettings(const scene::Scene& scene, const Rasterize
 /// by its key; the shape's own problems (unbounded, too large) are the scene file's.
 void withSceneErrors(const RasterizeOptions& options, const std::function<void()>& step);
 
+/// @brief rasterize()'s error for a keyed (animated) scene, whose frames rasterizeSequence()
+/// makes: a ParamError (parameter "frames") asking for them.
+[[noreturn]] void throwAnimated(const RasterizeOptions& options);
+
 /// @brief rasterize()'s error for a surface without voxels at the settings' voxel size.
 [[noreturn]] void throwNoVoxels(const RasterizeOptions& options,
                                 const raster::RasterSettings& settings,
@@ -98,6 +102,8 @@ struct FrameReport
     bool skipped = false;        ///< resumed: the file already held a whole frame
     std::size_t index = 0;       ///< its place in the sequence, from 0
     std::size_t count = 0;       ///< the sequence's number of frames
+    int rank = 0;                ///< the rank that made it, when ranks share the sequence (mpi)
+    std::uint64_t peakMemory = 0; ///< its maker's peak resident memory (bytes) when it was done
     /// No grids when skipped, nor when written to a file: a sequence with an output keeps
     /// only the frames being made in memory (read a frame's grid back from its file).
     RasterizeResult result;
@@ -114,8 +120,17 @@ struct SequenceOptions
     /// Frames made at once; 0: as many as there are threads, while that many of the first
     /// frame's peak memory fits util::memoryBudget() (docs/performance.md#sequences).
     int parallelFrames = 0;
-    /// Called after each frame is written (or skipped), in frame order.
+    /// Called after each frame is written (or skipped), in frame order (in the order frames
+    /// finish with nextFrame).
     std::function<void(const FrameReport&)> onFrame;
+    /// When set, where the frames come from (processes sharing a sequence: ivdb::mpi's ranks):
+    /// called one call at a time whenever a frame may start, it returns the index (into
+    /// sequenceFrames()) of the next frame to make, or none when there are no more. Unset:
+    /// every frame in order.
+    std::function<std::optional<std::size_t>()> nextFrame;
+    /// When set, the frames of the sequence finished so far, by every process sharing it (for
+    /// the one progress percentage); unset: this process's.
+    std::function<std::size_t()> framesDone;
 };
 
 struct SequenceResult
@@ -123,6 +138,16 @@ struct SequenceResult
     std::size_t written = 0, skipped = 0;
     double totalSeconds = 0.0;
 };
+
+/// @brief The frames @a options make, in order, after checking that the scene is keyed, that
+/// several frames go to distinct files, that the first frame's output can be written and that
+/// every frame's scene and settings are valid (no file is read or written).
+/// @throw as rasterizeSequence() does before its first frame
+std::vector<int> sequenceFrames(const SequenceOptions& options);
+
+/// @brief True if @a path already holds a whole frame: a .vdb that reads whole with a `surface`
+/// level set (what `resume` skips).
+bool isWholeFrame(const std::string& path);
 
 /// @brief Rasterize the frames of a keyed scene (docs/scene-format.md#animation) into a .vdb
 /// sequence: the first frame alone, then several frames at once (each on the threads it gets),

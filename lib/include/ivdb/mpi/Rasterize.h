@@ -39,13 +39,40 @@ struct RasterizeResult
 /// once every rank has written.
 /// Collective: call it on every rank of @a comm with the same options.
 /// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own, so a
-/// ParamError keeps its parameter): the errors of jobs::rasterize(); openvdb::RuntimeError for
-/// dense sampling, a keyed scene, or voxels no local distance method answers (in bands wider
+/// ParamError keeps its parameter): the errors of jobs::rasterize() (a keyed scene's frames are
+/// rasterizeSequence()'s); openvdb::RuntimeError for dense sampling, or voxels no local distance method answers (in bands wider
 /// than the default, near edges and corners of shapes that are not exact distances), which need
 /// fast sweeping across ranks;
 /// openvdb::IoError when the file cannot be written. Nothing is written on any error: the
 /// temporary file is removed and an existing output is left as it was.
 RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& options);
+
+/// @brief What rasterizeSequence() reports, the same on every rank.
+struct SequenceResult
+{
+    int ranks = 1;
+    std::size_t frames = 0;                  ///< the sequence's
+    std::size_t written = 0, skipped = 0;
+    double totalSeconds = 0.0;
+    std::vector<std::uint64_t> rankFrames;     ///< per rank: frames it made (on rank 0)
+    std::vector<std::uint64_t> rankPeakMemory; ///< per rank: peak resident memory (bytes)
+};
+
+/// @brief jobs::rasterizeSequence() over the ranks of @a comm: the same files, each frame made
+/// and written whole by one rank, as plain ivdb makes it (several frames at once on the rank's
+/// threads).
+/// @details Every rank checks the sequence first (jobs::sequenceFrames). Rank 0 then hands the
+/// frames out in order, one at a time, to whichever rank asks for one when it can start a frame
+/// (so the ranks stay busy however the frames' costs vary, and frames skipped by `resume` cost
+/// nearly nothing), and calls @a options.onFrame on its main thread for each frame in frame
+/// order, with the rank that made it. After a rank fails, or rank 0 is interrupted, no frame is
+/// handed out; the frames being made finish (or stop at their rank's interrupter) and every
+/// frame written stays whole.
+/// Collective: call it on every rank of @a comm with the same options, from the thread that
+/// initialized MPI (the frames are made on another thread, which never calls MPI).
+/// @throw on every rank, the error of the lowest rank that failed (see rasterize()): the errors
+/// of jobs::rasterizeSequence(); ParamError for dense sampling or no output.
+SequenceResult rasterizeSequence(MPI_Comm comm, const jobs::SequenceOptions& options);
 
 /// @brief How many threads a rank should use.
 struct ThreadShare
