@@ -509,6 +509,21 @@ class TestMpiSequence(MpiCase):
         self.assertIn("%d frames written, 0 skipped on 3 ranks" % len(self.FRAMES), r.stdout)
         self.assertEqual(len([l for l in r.stdout.splitlines() if l.startswith("  rank ")]), 3)
 
+    def test_more_ranks_than_frames(self):
+        import json
+        r, out = self.sequence(4, "--json", frames="7-13:6")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        j = json.loads(r.stdout)
+        self.assertEqual([f["frame"] for f in j["frames"]], [7, 13])
+        self.assertEqual(sum(x["frames"] for x in j["per_rank"]), 2)
+        for frame in (7, 13):
+            self.assertEqual(masked(os.path.join(out, "m_%04d.vdb" % frame)), self.expected(frame))
+        # Every frame already written: nothing to make.
+        r, out = self.sequence(4, "--json", "--resume", frames="7-13:6")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        j = json.loads(r.stdout)
+        self.assertEqual((j["written"], j["skipped"]), (0, 2))
+
     def test_resume_makes_only_the_missing_frames(self):
         r, out = self.sequence(2)
         self.assertEqual(r.returncode, 0, r.stderr)
@@ -541,6 +556,9 @@ class TestMpiSequence(MpiCase):
         self.assertEqual(len(errors), 1, r.stderr)
         self.assertIn("would need about", errors[0])
         self.assertNotIn("g_4.vdb", os.listdir(out))
+        # No frame is handed out once frame 4 failed: the ranks were making at most frames 5
+        # and 6 (one each, --parallel-frames 1) when it did.
+        self.assertEqual([n for n in os.listdir(out) if n in ("g_7.vdb", "g_8.vdb", "g_9.vdb")], [])
         for name in os.listdir(out):
             self.assertRegex(name, r"^g_\d\.vdb$")
             want = self.path("want.vdb")
@@ -557,6 +575,8 @@ class TestMpiSequence(MpiCase):
         import time
         out = self.path("stop")
         os.mkdir(out)
+        # mpirun gives the ranks 1 s after its SIGTERM before it kills them; they stop at their
+        # frames' next progress check, well within it.
         args = ["mpirun", "--oversubscribe", "--bind-to", "none", "-np", "3", IVDB_MPI,
                 "rasterize", self.scene, "--voxel-size", "0.008", "-o",
                 os.path.join(out, "m_####.vdb")]
@@ -572,6 +592,8 @@ class TestMpiSequence(MpiCase):
         self.assertGreaterEqual(len(written), 2)
         self.assertIn("ivdb-mpi: error: interrupted; ", stderr)
         self.assertIn(" of 48 frames are written whole", stderr)
+        said = int(stderr.split("interrupted; ")[1].split(" of 48")[0])
+        self.assertEqual(said, len(written), stderr)
         self.assertEqual([n for n in written if not n.startswith("m_")], [], "temporary files left")
         import pyopenvdb as vdb
         for name in written:

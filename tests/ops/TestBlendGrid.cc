@@ -13,8 +13,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
+#include <set>
 #include <vector>
 
 using namespace ivdb;
@@ -361,5 +363,50 @@ TEST_F(TestBlendGrid, SmoothEqualsFormulaAndSceneSmooth)
     for (double k : {-1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
         s.k = k;
         EXPECT_THROW(ops::blend(ops::CsgOp::Union, {a, b}, s), ParamError) << k;
+    }
+}
+
+TEST_F(TestBlendGrid, TheCreaseReadsOnlyTheLeavesItNames)
+{
+    // BlendCrease::compute() (blend()'s work around the crease, which ivdb-mpi runs on one rank
+    // from the leaves it loads) with every leaf outside leavesRead() poisoned, once with NaN and
+    // once with an inside value: the same splice, bit for bit, as from the whole inputs. Short
+    // extensions (closest points, p = 1000), long ones (fast sweeping, p = 20) and the smooth
+    // minimum.
+    const double dx = 0.02;
+    const auto a = sphere(Vec3d(-0.5, 0.01, 0.0), dx), b = sphere(Vec3d(0.5, -0.01, 0.02), dx);
+    for (const auto& [p, k] : {std::pair<double, double>{1000.0, 0.0}, {20.0, 0.0}, {0.0, 0.1}}) {
+        ops::BlendSettings s;
+        s.p = p > 0.0 ? p : 10.0;
+        s.k = k;
+        const std::vector<openvdb::FloatGrid::Ptr> whole = {a->deepCopy(), b->deepCopy()};
+        const ops::BlendCrease crease(whole, s);
+        ASSERT_FALSE(crease.empty()) << "p " << p << " k " << k;
+        const auto expected = crease.compute(ops::CsgOp::Union, whole);
+        ASSERT_FALSE(expected.empty());
+        for (const float poison : {std::numeric_limits<float>::quiet_NaN(), -0.06f}) {
+            std::vector<openvdb::FloatGrid::Ptr> part;
+            std::size_t read = 0, poisoned = 0;
+            for (std::size_t i = 0; i < whole.size(); ++i) {
+                part.push_back(whole[i]->deepCopy());
+                std::set<openvdb::Coord> keep;
+                for (const auto& o : crease.leavesRead(i)) keep.insert(o);
+                for (auto it = part[i]->tree().beginLeaf(); it; ++it) {
+                    if (keep.count(it->origin())) {
+                        ++read;
+                        continue;
+                    }
+                    ++poisoned;
+                    for (openvdb::Index m = 0; m < 512; ++m) it->setValueOnly(m, poison);
+                }
+            }
+            EXPECT_GT(poisoned, 0u) << "p " << p << " k " << k;
+            const auto got = crease.compute(ops::CsgOp::Union, part);
+            ASSERT_EQ(got.size(), expected.size());
+            for (std::size_t j = 0; j < got.size(); ++j) {
+                ASSERT_EQ(std::memcmp(&got[j], &expected[j], sizeof(ops::BlendSplice)), 0)
+                    << "leaf " << j << ", p " << p << " k " << k << " poison " << poison;
+            }
+        }
     }
 }

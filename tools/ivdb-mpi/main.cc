@@ -369,6 +369,15 @@ int main(int argc, char** argv)
 {
     int provided = 0;
     MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
+    if (provided < MPI_THREAD_FUNNELED) {
+        // Sequences make frames on threads of their own while the main thread calls MPI.
+        if (ivdb::cli::worldRank() == 0) {
+            std::fprintf(stderr, "ivdb-mpi: error: this MPI library does not support threads "
+                         "(MPI_THREAD_FUNNELED); use a build of MPI that does\n");
+        }
+        MPI_Finalize();
+        return 1;
+    }
     // Each rank on its share of its machine's cores (--threads lowers it further).
     const ivdb::mpi::ThreadShare share = ivdb::mpi::threadShare(MPI_COMM_WORLD);
     int code = 0;

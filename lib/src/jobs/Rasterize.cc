@@ -249,6 +249,11 @@ public:
     /// Make (or, resuming, skip) frame @a i and keep its report for deliver().
     void make(std::size_t i)
     {
+        if (i >= mFrames.size()) { // a frame source that checked another sequence
+            OPENVDB_THROW(openvdb::RuntimeError, "frame " + std::to_string(i + 1) + " of a sequence "
+                          "of " + std::to_string(mFrames.size()) + " frames: " + mOpt.base.scene +
+                          " changed while its frames were being made");
+        }
         FrameReport report;
         report.frame = mFrames[i];
         report.index = i;

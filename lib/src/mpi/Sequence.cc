@@ -36,27 +36,30 @@ enum Tag : int {
     kDone = 4    ///< a rank's frames are all done: 0, or 1 if it failed
 };
 
+/// A frame's report as sent to rank 0 (no grids, no file name: rank 0 makes it from the
+/// pattern). Notes may name files whose names are not UTF-8: such bytes are replaced.
 std::string encodeReport(const jobs::FrameReport& f)
 {
     const jobs::RasterizeResult& r = f.result;
     const nlohmann::json j{
-        {"index", f.index}, {"frame", f.frame}, {"output", f.output}, {"skipped", f.skipped},
+        {"index", f.index}, {"frame", f.frame}, {"skipped", f.skipped},
         {"rank", f.rank}, {"peak", f.peakMemory}, {"voxels", r.activeVoxels},
         {"grid", r.gridBytes}, {"file", r.fileBytes}, {"compute", r.computeSeconds},
         {"total", r.totalSeconds}, {"notes", r.notes},
         {"stats", {r.stats.localDistances, r.stats.searchedDistances,
                    r.stats.approximateDistances, r.stats.sweptDistances}}};
-    return j.dump();
+    return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
-jobs::FrameReport decodeReport(const std::string& text, std::size_t count)
+jobs::FrameReport decodeReport(const std::string& text, std::size_t count,
+                               const std::string& pattern)
 {
     const nlohmann::json j = nlohmann::json::parse(text);
     jobs::FrameReport f;
     f.index = j.at("index");
     f.count = count;
     f.frame = j.at("frame");
-    f.output = j.at("output");
+    f.output = scene::frameFileName(pattern, f.frame);
     f.skipped = j.at("skipped");
     f.rank = j.at("rank");
     f.peakMemory = j.at("peak");
@@ -80,9 +83,11 @@ jobs::FrameReport decodeReport(const std::string& text, std::size_t count)
 class Maker
 {
 public:
-    /// Start making the frames of @a opt, with @a nextFrame and @a onFrame called on the
-    /// making thread.
-    Maker(jobs::SequenceOptions opt) : mOpt(std::move(opt))
+    /// The frames of @a opt, whose nextFrame and onFrame are called on the making thread.
+    explicit Maker(jobs::SequenceOptions opt) : mOpt(std::move(opt)) {}
+
+    /// Start making them (once the callbacks' targets exist).
+    void start()
     {
         mThread = std::thread([this] {
             mError = captured([this] { jobs::rasterizeSequence(mOpt); }, mMessage);
@@ -110,6 +115,7 @@ public:
     {
         std::unique_lock<std::mutex> lock(mMutex);
         mAsking = true;
+        mAskSeen = false;
         mChanged.notify_all();
         mChanged.wait(lock, [this] { return mAnswered; });
         mAnswered = false;
@@ -128,7 +134,7 @@ public:
     struct Work
     {
         std::deque<std::string> reports; ///< to send
-        bool asking = false;             ///< then answer() a frame
+        bool asking = false;             ///< a new ask: answer() it (now or later)
         bool finished = false;           ///< the making thread is done (after the above)
         bool failed = false;             ///< ... on an error
     };
@@ -137,12 +143,13 @@ public:
     Work next(std::optional<std::chrono::milliseconds> wait = std::nullopt)
     {
         std::unique_lock<std::mutex> lock(mMutex);
-        const auto ready = [this] { return mAsking || !mOutbox.empty() || mFinished; };
+        const auto ready = [this] { return (mAsking && !mAskSeen) || !mOutbox.empty() || mFinished; };
         if (wait) mChanged.wait_for(lock, *wait, ready);
         else mChanged.wait(lock, ready);
         Work w;
         w.reports.swap(mOutbox);
-        w.asking = mAsking;
+        w.asking = mAsking && !mAskSeen;
+        mAskSeen = mAskSeen || mAsking;
         w.finished = mFinished && !mAsking;
         w.failed = w.finished && mError;
         return w;
@@ -166,23 +173,40 @@ private:
     std::mutex mMutex;
     std::condition_variable mChanged;
     std::deque<std::string> mOutbox;
-    bool mAsking = false, mAnswered = false, mFinished = false;
+    bool mAsking = false, mAskSeen = false, mAnswered = false, mFinished = false;
     std::optional<std::size_t> mAnswer;
 };
 
-/// Rank 0's share-out: the frames in order, each to the first rank that asks, until there are
-/// no more or a rank failed; the reports delivered in frame order.
+/// Rank 0's share-out: the frames in order, each to a rank that asks, until there are no more
+/// or a rank failed; at most an equal share of the frames in flight on one rank at a time (a
+/// rank with many threads asks for as many frames at once); the reports delivered in frame
+/// order.
 class Dispatcher
 {
 public:
-    Dispatcher(std::size_t count, std::function<void(const jobs::FrameReport&)> onFrame)
-        : mCount(count), mOnFrame(std::move(onFrame)) {}
+    /// What a rank that asks gets.
+    struct Answer
+    {
+        bool wait = false;                  ///< nothing yet: ask again once a frame is done
+        std::optional<std::size_t> frame;   ///< else the frame, or none: no more
+    };
 
-    std::optional<std::size_t> take()
+    Dispatcher(std::size_t count, int ranks, std::function<void(const jobs::FrameReport&)> onFrame)
+        : mCount(count), mCap(std::max<std::size_t>(1, (count + std::size_t(ranks) - 1) / std::size_t(ranks))),
+          mInFlight(std::size_t(ranks), 0), mOnFrame(std::move(onFrame)) {}
+
+    Answer take(int rank)
     {
         std::lock_guard<std::mutex> lock(mMutex);
-        if (mStopped || mNext >= mCount) return std::nullopt;
-        return mNext++;
+        Answer a;
+        if (mStopped || mNext >= mCount) return a;
+        if (mInFlight[std::size_t(rank)] >= mCap) {
+            a.wait = true;
+            return a;
+        }
+        ++mInFlight[std::size_t(rank)];
+        a.frame = mNext++;
+        return a;
     }
 
     void stop()
@@ -194,6 +218,8 @@ public:
     void add(jobs::FrameReport report)
     {
         std::lock_guard<std::mutex> lock(mMutex);
+        std::size_t& flying = mInFlight[std::size_t(report.rank)];
+        flying -= flying > 0 ? 1 : 0;
         ++mDone;
         mMade.emplace(report.index, std::move(report));
     }
@@ -226,7 +252,8 @@ public:
     }
 
 private:
-    std::size_t mCount, mNext = 0, mDelivered = 0;
+    std::size_t mCount, mCap, mNext = 0, mDelivered = 0;
+    std::vector<std::size_t> mInFlight;
     bool mStopped = false;
     std::atomic<std::size_t> mDone{0};
     std::function<void(const jobs::FrameReport&)> mOnFrame;
@@ -234,13 +261,34 @@ private:
     std::map<std::size_t, jobs::FrameReport> mMade;
 };
 
-/// Rank 0's main thread: answer the ranks' asks, take their reports, deliver them in order,
-/// until every rank (this one's maker too) is done.
-void serve(MPI_Comm comm, Maker& maker, Dispatcher& dispatcher, SequenceResult& result,
-           util::Interrupter* interrupter)
+/// Rank 0's main thread: answer the ranks' asks (later, for a rank at its share in flight),
+/// take their reports, deliver them in order, until every rank (this one's maker too) is done.
+/// A failure here (out of memory, the caller's onFrame throwing) stops the handing out and the
+/// delivering but not the serving, so that no rank waits for ever; it is returned, with its
+/// text in @a message.
+std::exception_ptr serve(MPI_Comm comm, Maker& maker, Dispatcher& dispatcher,
+                         SequenceResult& result, const jobs::SequenceOptions& opt,
+                         std::string& message)
 {
+    std::exception_ptr failure;
+    const auto guarded = [&](auto&& step) {
+        if (failure) return;
+        failure = captured(step, message);
+        if (failure) dispatcher.stop();
+    };
+    const std::string& pattern = opt.base.output;
     int open = sizeOf(comm) - 1;
     bool mine = true;
+    std::deque<int> waiting; // ranks whose ask is not answered yet
+    bool ownAsk = false;     // this rank's maker's
+    const auto answer = [&](int rank) {
+        if (util::wasInterrupted(opt.base.interrupter)) dispatcher.stop();
+        const Dispatcher::Answer a = dispatcher.take(rank);
+        if (a.wait) return false;
+        const std::int64_t frame = a.frame ? std::int64_t(*a.frame) : -1;
+        MPI_Send(&frame, 1, MPI_INT64_T, rank, kGive, comm);
+        return true;
+    };
     while (open > 0 || mine) {
         bool busy = false;
         int flag = 0;
@@ -254,45 +302,71 @@ void serve(MPI_Comm comm, Maker& maker, Dispatcher& dispatcher, SequenceResult& 
             MPI_Recv(text.data(), bytes, MPI_CHAR, status.MPI_SOURCE, status.MPI_TAG, comm,
                      MPI_STATUS_IGNORE);
             if (status.MPI_TAG == kAsk) {
-                if (util::wasInterrupted(interrupter)) dispatcher.stop();
-                const std::optional<std::size_t> frame = dispatcher.take();
-                const std::int64_t answer = frame ? std::int64_t(*frame) : -1;
-                MPI_Send(&answer, 1, MPI_INT64_T, status.MPI_SOURCE, kGive, comm);
+                waiting.push_back(status.MPI_SOURCE);
             } else if (status.MPI_TAG == kReport) {
-                dispatcher.add(decodeReport(text, result.frames));
+                guarded([&] { dispatcher.add(decodeReport(text, result.frames, pattern)); });
             } else if (status.MPI_TAG == kDone) {
                 if (text != "0") dispatcher.stop();
                 --open;
             }
         }
+        for (std::size_t k = waiting.size(); k-- > 0;) {
+            const int rank = waiting.front();
+            waiting.pop_front();
+            if (!answer(rank)) waiting.push_back(rank);
+        }
         if (mine) {
             const Maker::Work w = maker.next(std::chrono::milliseconds(busy ? 0 : 2));
-            for (const std::string& r : w.reports) dispatcher.add(decodeReport(r, result.frames));
-            if (w.asking) maker.answer(dispatcher.take());
+            for (const std::string& r : w.reports) {
+                guarded([&] { dispatcher.add(decodeReport(r, result.frames, pattern)); });
+            }
+            ownAsk = ownAsk || w.asking;
+            if (ownAsk) {
+                if (util::wasInterrupted(opt.base.interrupter)) dispatcher.stop();
+                const Dispatcher::Answer a = dispatcher.take(0);
+                if (!a.wait) {
+                    maker.answer(a.frame);
+                    ownAsk = false;
+                }
+            }
             if (w.failed) dispatcher.stop();
             if (w.finished) mine = false;
         } else if (!busy) {
             std::this_thread::sleep_for(std::chrono::milliseconds(2));
         }
-        dispatcher.deliver(result);
+        guarded([&] { dispatcher.deliver(result); });
     }
+    guarded([&] { dispatcher.deliver(result, true); }); // what was made before a failure
+    return failure;
 }
 
 /// Another rank's main thread: carry its maker's asks and reports to rank 0 until it is done.
+/// While an ask waits for rank 0's answer, the reports keep going (rank 0 may be waiting for
+/// one of them to answer).
 void carry(MPI_Comm comm, Maker& maker)
 {
+    std::optional<MPI_Request> asked;
+    std::int64_t answer = -1;
     for (;;) {
-        const Maker::Work w = maker.next();
+        const Maker::Work w = maker.next(std::chrono::milliseconds(asked ? 2 : 50));
         for (const std::string& r : w.reports) {
             MPI_Send(r.data(), int(r.size()), MPI_CHAR, 0, kReport, comm);
         }
-        if (w.asking) {
+        if (w.asking && !asked) {
             MPI_Send(nullptr, 0, MPI_CHAR, 0, kAsk, comm);
-            std::int64_t answer = -1;
-            MPI_Recv(&answer, 1, MPI_INT64_T, 0, kGive, comm, MPI_STATUS_IGNORE);
-            maker.answer(answer < 0 ? std::nullopt : std::optional<std::size_t>(std::size_t(answer)));
+            asked.emplace();
+            MPI_Irecv(&answer, 1, MPI_INT64_T, 0, kGive, comm, &*asked);
         }
-        if (w.finished) return;
+        if (asked) {
+            int flag = 0;
+            MPI_Test(&*asked, &flag, MPI_STATUS_IGNORE);
+            if (flag) {
+                asked.reset();
+                maker.answer(answer < 0 ? std::nullopt
+                                        : std::optional<std::size_t>(std::size_t(answer)));
+            }
+        }
+        if (w.finished && !asked) return;
     }
 }
 
@@ -326,31 +400,35 @@ SequenceResult rasterizeSequence(MPI_Comm world, const jobs::SequenceOptions& op
     MPI_Comm_dup(world, &comm);
     jobs::SequenceOptions mine = opt;
     std::optional<Dispatcher> dispatcher;
-    std::optional<Maker> maker;
+    Maker* maker = nullptr; // set before its thread starts
     if (rank == 0) {
-        dispatcher.emplace(frames.size(), opt.onFrame);
-        mine.nextFrame = [&] { return dispatcher->take(); };
+        dispatcher.emplace(frames.size(), size, opt.onFrame);
+        mine.nextFrame = [&]() { return maker->ask(); };
         mine.framesDone = [&] { return dispatcher->done(); };
         mine.onFrame = [&](const jobs::FrameReport& f) { maker->report(encodeReport(f)); };
-        maker.emplace(mine);
-        serve(comm, *maker, *dispatcher, result, opt.base.interrupter);
     } else {
-        mine.nextFrame = [&] { return maker->ask(); };
+        mine.nextFrame = [&]() { return maker->ask(); };
         mine.onFrame = [&](const jobs::FrameReport& f) {
             jobs::FrameReport sent = f;
             sent.rank = rank;
             maker->report(encodeReport(sent));
         };
-        maker.emplace(mine);
-        carry(comm, *maker);
     }
-    std::string message;
-    const std::exception_ptr error = maker->join(message);
+    Maker making(mine);
+    maker = &making;
+    making.start();
+    std::string message, served;
+    std::exception_ptr failure;
+    if (rank == 0) failure = serve(comm, making, *dispatcher, result, opt, served);
+    else carry(comm, making);
+    std::exception_ptr error = making.join(message);
+    if (!error && failure) {
+        error = failure;
+        message = served;
+    }
     if (rank != 0) {
         const char done = error ? '1' : '0';
         MPI_Send(&done, 1, MPI_CHAR, 0, kDone, comm);
-    } else {
-        dispatcher->deliver(result, true); // what was made before a failure
     }
     MPI_Comm_free(&comm);
 

@@ -574,34 +574,43 @@ openvdb::FloatGrid::Ptr redistanceBlend(BlendedValues& b, const BlendPlan& plan,
 }
 
 /// Step 6, the splice: the re-distanced blend replaces the sharp result at the blended voxels
-/// (inside the band), or their sign does (beyond it).
-void spliceBlend(openvdb::FloatGrid& result, const BlendedValues& b,
-                 const openvdb::FloatGrid& redistanced, float bg)
+/// (inside the band), or their sign does (beyond it): per leaf, those voxels' values and states.
+std::vector<BlendSplice> spliceLeaves(const BlendedValues& b, const openvdb::FloatGrid& redistanced,
+                                      float bg)
 {
-    std::vector<LeafT*> out;
+    std::vector<const MaskTree::LeafNodeType*> marks;
     for (auto it = b.blended->cbeginLeaf(); it; ++it) {
-        if (!it->isEmpty()) out.push_back(result.tree().touchLeaf(it->origin()));
+        if (!it->isEmpty()) marks.push_back(it.getLeaf());
     }
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, out.size()),
+    std::vector<BlendSplice> out(marks.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, marks.size()),
                       [&](const tbb::blocked_range<size_t>& r) {
         for (size_t k = r.begin(); k < r.end(); ++k) {
-            LeafT& leaf = *out[k];
-            const LeafT* d = redistanced.tree().probeConstLeaf(leaf.origin());
-            const LeafT* f = b.values->tree().probeConstLeaf(leaf.origin());
-            const MaskTree::LeafNodeType* mark = b.blended->probeConstLeaf(leaf.origin());
+            const MaskTree::LeafNodeType& mark = *marks[k];
+            BlendSplice& s = out[k];
+            const Coord o = mark.origin();
+            for (int a = 0; a < 3; ++a) s.origin[a] = o[a];
+            LeafT::NodeMaskType active;
+            const LeafT* d = redistanced.tree().probeConstLeaf(o);
+            const LeafT* f = b.values->tree().probeConstLeaf(o);
             for (openvdb::Index m = 0; m < LeafT::SIZE; ++m) {
-                if (!mark->isValueOn(m)) continue;
+                if (!mark.isValueOn(m)) continue;
                 const float v = d ? d->getValue(m) : bg;
                 if (d && d->isValueOn(m) && std::abs(v) < bg) {
-                    leaf.setValueOn(m, v);
+                    s.values[m] = v;
+                    active.setOn(m);
                 } else {
-                    const float s = f ? f->getValue(m) : v;
-                    leaf.setValueOff(m, s > 0.0f ? bg : -bg);
+                    const float sv = f ? f->getValue(m) : v;
+                    s.values[m] = sv > 0.0f ? bg : -bg;
                 }
+            }
+            for (int w = 0; w < BlendSplice::kWords; ++w) {
+                s.marked[w] = mark.getValueMask().getWord<std::uint64_t>(openvdb::Index(w));
+                s.active[w] = active.getWord<std::uint64_t>(openvdb::Index(w));
             }
         }
     });
-    openvdb::tools::pruneLevelSet(result.tree());
+    return out;
 }
 
 std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& region)
@@ -620,6 +629,15 @@ std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& reg
     return os.str();
 }
 
+/// How far (voxels) around the crease compute() reads input @a i's values: the voxels whose
+/// bands it grows (keep) and what growing them reads, one voxel beyond for the normals' stencil
+/// or the extension's length beyond for fast sweeping.
+int readReach(const BlendPlan& plan, size_t i)
+{
+    const int keep = std::max(plan.dilation[i] + 1, int(std::ceil(plan.halfWidth)) + 2);
+    return keep + plan.dilation[i] + 2;
+}
+
 // The blend of level sets already on one transform; consumes @a grids (the sharp operation
 // steals their nodes). The result is the sharp operation (OpenVDB's csg tools) everywhere but
 // around the crease, which alone needs grown bands and re-distancing.
@@ -627,24 +645,15 @@ openvdb::FloatGrid::Ptr blendOnTarget(CsgOp op, const std::vector<openvdb::Float
                                       const BlendSettings& settings, std::vector<std::string>* notes)
 {
     util::InterruptScope scope(settings.interrupter, "Blending");
-    const BlendPlan plan = planBlend(grids, settings);
-    const MaskTree::Ptr crease = findCrease(plan, grids);
-    const bool hasCrease = crease->activeVoxelCount() > 0;
-    util::checkInterrupt(settings.interrupter);
-    // The crease's re-distancing reads the surface within a band width of it: the region.
-    const MaskTree::Ptr region = dilatedCopy(*crease, int(std::ceil(plan.halfWidth)) + 2);
-    if (notes) notes->push_back(blendNote(plan, hasCrease, *region));
-
-    BlendedValues blended;
-    openvdb::FloatGrid::Ptr redistanced;
-    if (hasCrease) {
-        const auto grown = growBands(plan, grids, *crease, settings.interrupter);
-        blended = blendValues(op, plan, settings, grids, grown, *region,
-                              finestInput(grids).transform());
-        redistanced = redistanceBlend(blended, plan, settings.interrupter);
-    }
+    const BlendCrease crease(grids, settings);
+    if (notes) notes->push_back(crease.note());
+    std::vector<BlendSplice> splice;
+    if (!crease.empty()) splice = crease.compute(op, grids, settings.interrupter);
     openvdb::FloatGrid::Ptr result = csgInPlace(op, grids, nullptr);
-    if (hasCrease) spliceBlend(*result, blended, *redistanced, plan.bg);
+    if (!crease.empty()) {
+        spliceBlend(result->tree(), splice);
+        openvdb::tools::pruneLevelSet(result->tree());
+    }
     result->setGridClass(openvdb::GRID_LEVEL_SET);
     result->setName("surface");
     scope.end();
@@ -662,6 +671,83 @@ implicit::BlendKernel blendKernel(const BlendSettings& settings)
 double blendReach(double p, double toleranceWorld)
 {
     return std::max(0.0, std::log(1.0 / (p * toleranceWorld)) / p);
+}
+
+struct BlendCrease::Impl
+{
+    BlendSettings settings;
+    BlendPlan plan;
+    MaskTree::Ptr crease, region;
+};
+
+BlendCrease::BlendCrease(const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                         const BlendSettings& settings)
+    : mImpl(std::make_unique<Impl>())
+{
+    checkSettings(grids.size(), settings);
+    Impl& m = *mImpl;
+    m.settings = settings;
+    m.plan = planBlend(grids, settings);
+    m.crease = findCrease(m.plan, grids);
+    util::checkInterrupt(settings.interrupter);
+    // The crease's re-distancing reads the surface within a band width of it: the region.
+    m.region = dilatedCopy(*m.crease, int(std::ceil(m.plan.halfWidth)) + 2);
+}
+
+BlendCrease::~BlendCrease() = default;
+
+bool BlendCrease::empty() const { return mImpl->crease->activeVoxelCount() == 0; }
+
+std::string BlendCrease::note() const
+{
+    return blendNote(mImpl->plan, !empty(), *mImpl->region);
+}
+
+std::vector<Coord> BlendCrease::leavesRead(size_t input) const
+{
+    const Impl& m = *mImpl;
+    if (empty()) return {};
+    return leafOrigins(*leafMask(*dilatedCopy(*m.crease, readReach(m.plan, input))));
+}
+
+std::vector<Coord> BlendCrease::leavesWritten() const
+{
+    return leafOrigins(*leafMask(*mImpl->region));
+}
+
+std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
+                                              const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                                              util::Interrupter* interrupter) const
+{
+    const Impl& m = *mImpl;
+    if (empty()) return {};
+    const auto grown = growBands(m.plan, grids, *m.crease, interrupter);
+    BlendedValues blended = blendValues(op, m.plan, m.settings, grids, grown, *m.region,
+                                        finestInput(grids).transform());
+    const openvdb::FloatGrid::Ptr redistanced = redistanceBlend(blended, m.plan, interrupter);
+    return spliceLeaves(blended, *redistanced, m.plan.bg);
+}
+
+void spliceBlend(openvdb::FloatTree& tree, const std::vector<BlendSplice>& leaves)
+{
+    std::vector<LeafT*> out(leaves.size());
+    for (size_t k = 0; k < leaves.size(); ++k) {
+        const BlendSplice& s = leaves[k];
+        out[k] = tree.touchLeaf(Coord(s.origin[0], s.origin[1], s.origin[2]));
+    }
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, out.size()),
+                      [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t k = r.begin(); k < r.end(); ++k) {
+            const BlendSplice& s = leaves[k];
+            LeafT& leaf = *out[k];
+            for (openvdb::Index m = 0; m < LeafT::SIZE; ++m) {
+                const std::uint64_t bit = std::uint64_t(1) << (m & 63);
+                if (!(s.marked[m >> 6] & bit)) continue;
+                if (s.active[m >> 6] & bit) leaf.setValueOn(m, s.values[m]);
+                else leaf.setValueOff(m, s.values[m]);
+            }
+        }
+    });
 }
 
 openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::ConstPtr>& inputs,

@@ -47,14 +47,15 @@ struct RasterizeResult
 /// temporary file is removed and an existing output is left as it was.
 RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& options);
 
-/// @brief What rasterizeSequence() reports, the same on every rank.
+/// @brief What rasterizeSequence() reports: `ranks`, `frames` and `totalSeconds` on every rank,
+/// the rest on rank 0 (which receives the frames' reports).
 struct SequenceResult
 {
     int ranks = 1;
     std::size_t frames = 0;                  ///< the sequence's
     std::size_t written = 0, skipped = 0;
     double totalSeconds = 0.0;
-    std::vector<std::uint64_t> rankFrames;     ///< per rank: frames it made (on rank 0)
+    std::vector<std::uint64_t> rankFrames;     ///< per rank: frames it made
     std::vector<std::uint64_t> rankPeakMemory; ///< per rank: peak resident memory (bytes)
 };
 
@@ -63,11 +64,12 @@ struct SequenceResult
 /// threads).
 /// @details Every rank checks the sequence first (jobs::sequenceFrames). Rank 0 then hands the
 /// frames out in order, one at a time, to whichever rank asks for one when it can start a frame
-/// (so the ranks stay busy however the frames' costs vary, and frames skipped by `resume` cost
-/// nearly nothing), and calls @a options.onFrame on its main thread for each frame in frame
-/// order, with the rank that made it. After a rank fails, or rank 0 is interrupted, no frame is
-/// handed out; the frames being made finish (or stop at their rank's interrupter) and every
-/// frame written stays whole.
+/// (so the ranks stay busy however the frames' costs vary), with at most an equal share of the
+/// frames in flight on one rank, and calls @a options.onFrame on its main thread for each frame
+/// in frame order, with the rank that made it. Once a rank's failure reaches rank 0 (when that
+/// rank's frames in flight have ended), or rank 0 is interrupted, no frame is handed out; the
+/// frames being made finish (or stop at their rank's interrupter) and every frame written stays
+/// whole.
 /// Collective: call it on every rank of @a comm with the same options, from the thread that
 /// initialized MPI (the frames are made on another thread, which never calls MPI).
 /// @throw on every rank, the error of the lowest rank that failed (see rasterize()): the errors

@@ -6,7 +6,12 @@
 
 #include <openvdb/util/NullInterrupter.h>
 
+#include <ivdb/util/Interrupt.h>
+
 #include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
 
 namespace ivdb::ops {
 
@@ -56,5 +61,58 @@ openvdb::FloatGrid::Ptr blend(CsgOp op, const std::vector<openvdb::FloatGrid::Co
 openvdb::FloatGrid::Ptr blendInPlace(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& inputs,
                                      const BlendSettings& settings,
                                      std::vector<std::string>* notes = nullptr);
+
+/// @brief One leaf of what a blend changes in the sharp operation's result: the voxels it sets
+/// (marked), their values and which of them are active. Plain data (ivdb::mpi sends it).
+struct BlendSplice
+{
+    static constexpr int kWords = 8; ///< 64-bit words of a leaf's 512-voxel mask
+    std::int32_t origin[3] = {0, 0, 0};
+    std::int32_t unused = 0;
+    std::uint64_t marked[kWords] = {}, active[kWords] = {};
+    float values[512] = {};
+};
+
+/// @brief The part of a blend that differs from the sharp operation (blend()'s steps around the
+/// crease), for callers that hold only parts of the inputs (ivdb::mpi): found from the inputs'
+/// topologies alone, and computed from the values of the leaves near the crease alone.
+/// blend() is: BlendCrease, compute(), the sharp operation, spliceBlend() into its result, and
+/// pruning it as a level set (when the crease is not empty).
+class BlendCrease
+{
+public:
+    /// @brief Plan the blend of @a grids (on one transform) and find its crease, from their
+    /// topologies (no voxel value is read).
+    /// @throw what blend() throws before it reads values (bad settings, an extension that would
+    /// not fit in memory)
+    BlendCrease(const std::vector<openvdb::FloatGrid::Ptr>& grids, const BlendSettings& settings);
+    ~BlendCrease();
+    BlendCrease(const BlendCrease&) = delete;
+    BlendCrease& operator=(const BlendCrease&) = delete;
+
+    /// @brief True if the inputs do not come within the blend's reach: the blend is the sharp
+    /// operation.
+    bool empty() const;
+    /// @brief The note blend() gives (the extension and the voxels re-distanced).
+    std::string note() const;
+    /// @brief The origins of the leaves of input @a input whose values compute() may read.
+    std::vector<openvdb::Coord> leavesRead(std::size_t input) const;
+    /// @brief The origins of the leaves compute()'s splice may write (a superset).
+    std::vector<openvdb::Coord> leavesWritten() const;
+    /// @brief The blend's values where they differ from the sharp operation's: the bands grown
+    /// around the crease, the blended values, re-distanced. Reads only the leavesRead() of
+    /// @a grids (the grids given to the constructor, or the same with other leaves' values
+    /// missing).
+    /// @throw openvdb::RuntimeError on interruption
+    std::vector<BlendSplice> compute(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                                     util::Interrupter* interrupter = nullptr) const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> mImpl;
+};
+
+/// @brief Set the voxels of @a leaves in @a tree (creating their leaves), without pruning.
+void spliceBlend(openvdb::FloatTree& tree, const std::vector<BlendSplice>& leaves);
 
 } // namespace ivdb::ops
