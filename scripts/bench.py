@@ -43,13 +43,17 @@ Section "mpi" (ivdb-mpi, issue 16):
     union` and `ivdb-mpi csg union` of it and a second sphere: read, compute, write and total
     time and the largest peak memory of a rank, interleaved;
   * `ivdb plan` of a sphere of about 10^10 active voxels on 64 and 512 ranks.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|sequence|mpi|all]
+Section "mpi-blend": `ivdb blend union -p 1000` and `mpirun -np N ivdb-mpi blend union -p 1000` of
+  the "csg" section's two radius-400 spheres: read, blend, write and total time and the largest
+  peak memory of a rank, interleaved.
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|sequence|mpi|mpi-blend|all]
 [--reps N] [--quick]
 """
 import argparse
 import json
 import math
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -100,7 +104,7 @@ def main():
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
     ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "mesh", "sequence", "mpi",
-                                          "all"],
+                                          "mpi-blend", "all"],
                     default="all")
     args = ap.parse_args()
     reps = 3 if args.quick else args.reps
@@ -124,6 +128,8 @@ def main():
             bench_sequence(tmp, reps)
         if args.section in ("mpi", "all"):
             bench_mpi(tmp, 3 if args.quick else min(reps, 3), args.quick)
+        if args.section in ("mpi-blend", "all"):
+            bench_mpi_blend(tmp, big, 3 if args.quick else min(reps, 3))
 
 
 MESH_TO_LEVEL_SET = """
@@ -244,7 +250,7 @@ MPI_ENV = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CO
 
 def summary_seconds(line, word):
     """The seconds after `word` in a summary line ("compute 1.234 s")."""
-    return float(line.split(word + " ")[1].split(" s")[0])
+    return float(re.search(r"\b%s ([0-9.]+) s\b" % re.escape(word), line).group(1))
 
 
 def interleaved(runs, reps, out, parse):
@@ -366,11 +372,33 @@ def bench_mpi(tmp, reps, quick):
     print()
 
 
+def bench_mpi_blend(tmp, big, reps):
+    """ivdb blend against ivdb-mpi blend on 1 to 4 ranks: rank 0 blends around the crease alone."""
+    a, b = two_spheres(tmp, big, "ba.vdb", "bb.vdb")
+    bench_mpi_file_op(f"`ivdb blend union -p 1000` of two radius-{big} spheres against `mpirun ... "
+                      f"-np N ivdb-mpi blend union -p 1000`",
+                      ["blend", "union", a, b, "-p", "1000"], os.path.join(tmp, "mpi_blend.vdb"),
+                      reps, "blend")
+    print()
+
+
 def gbench_medians(pattern, reps):
     res = subprocess.run([BENCH, f"--benchmark_filter={pattern}", f"--benchmark_repetitions={reps}",
                           "--benchmark_format=json"], check=True, capture_output=True, text=True)
     return {b["run_name"].split("/")[0]: b["real_time"]
             for b in json.loads(res.stdout)["benchmarks"] if b.get("aggregate_name") == "median"}
+
+
+def two_spheres(tmp, big, name_a, name_b):
+    """Two radius-@big-voxel spheres, centres 0.7 radii apart along x, written to @tmp."""
+    paths = [os.path.join(tmp, name_a), os.path.join(tmp, name_b)]
+    for path, cx in zip(paths, (-0.35, 0.35)):
+        scene = os.path.join(tmp, "s.json")
+        with open(scene, "w") as f:
+            json.dump({"voxel_size": 1.0 / big, "shape": {"type": "sphere", "center": [cx, 0, 0],
+                                                          "radius": 1}}, f)
+        run([IVDB, "rasterize", scene, "-o", path, "-q"])
+    return paths
 
 
 def bench_csg(tmp, big, reps):
@@ -390,13 +418,7 @@ def bench_csg(tmp, big, reps):
         print(f"| blend union p = {p}, {ext}-voxel band extension (radius {r}) vs sharp csg union | "
               f"{blend:.0f} ms | {sharp:.1f} ms | **{blend / sharp:.0f}x the time** |")
     print()
-    a, b = os.path.join(tmp, "a.vdb"), os.path.join(tmp, "b.vdb")
-    for path, cx in ((a, -0.35), (b, 0.35)):
-        scene = os.path.join(tmp, "s.json")
-        with open(scene, "w") as f:
-            json.dump({"voxel_size": 1.0 / big, "shape": {"type": "sphere", "center": [cx, 0, 0],
-                                                          "radius": 1}}, f)
-        run([IVDB, "rasterize", scene, "-o", path, "-q"])
+    a, b = two_spheres(tmp, big, "a.vdb", "b.vdb")
     out_a, out_b = os.path.join(tmp, "ua.vdb"), os.path.join(tmp, "ub.vdb")
     t, m = median_runs({
         "ivdb": [IVDB, "csg", "union", a, b, "-o", out_a, "-q"],

@@ -3,8 +3,8 @@
 `mpirun -np N ivdb-mpi rasterize` writes the file `ivdb rasterize` writes, byte for byte but the
 random UUID, for exact distances, true distances (CSG, quadrics, blends, a mesh), the bound mode,
 every compression and half floats; pyopenvdb reads it; bad input fails on every rank with one
-message and writes nothing. The same for `ivdb-mpi gradient`, `curvature` and `csg` against
-`ivdb gradient`, `curvature` and `csg`, on files ivdb and OpenVDB wrote.
+message and writes nothing. The same for `ivdb-mpi gradient`, `curvature`, `csg` and `blend`
+against plain ivdb's, on files ivdb and OpenVDB wrote, and for a keyed scene's frames.
 
 Run by ctest with IVDB_BINARY and IVDB_MPI_BINARY set; mpirun must be on PATH (openmpi-bin)."""
 
@@ -447,8 +447,78 @@ class TestMpiCsg(MpiCase):
         self.assertIn("--grid", self.errors(["csg", "union", big, big, "-o", "OUT", "--grid", "x"]))
         self.assertIn("--fog", self.errors(["csg", "union", big, big, "-o", "OUT", "--fog"]))
         self.assertIn("not expected", self.errors(["csg", "union", big, big, "-o", "OUT", "--fog"]))
-        self.assertIn("unknown command", self.errors(["blend", "union", big, big, "-o", "OUT",
-                                                      "-p", "10"]))
+
+
+class TestMpiBlend(MpiCase):
+    """blend: the ranks combine their nodes sharply, rank 0 blends around the crease (from the
+    inputs' topologies) and sends each rank its part; the file is the one ivdb blend writes."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.dir = tempfile.mkdtemp(prefix="ivdb-mpi-blend-")
+        # Two spheres whose crease circle lies in the plane x = 0, a boundary of 128^3 nodes, and
+        # crosses z = 0, another; their leaves stay below y = 0, while a wide blend reaches above
+        # it, into nodes neither input holds. A third sphere lies over both.
+        shapes = {"a": '{"type": "sphere", "center": [-0.35, -0.75, 0], "radius": 0.6}',
+                  "b": '{"type": "sphere", "center": [0.35, -0.75, 0], "radius": 0.6}',
+                  "c": '{"type": "sphere", "center": [0, -0.3, 0.3], "radius": 0.4}',
+                  "coarse": '{"type": "sphere", "radius": 0.5}'}
+        for name, shape in shapes.items():
+            scene = os.path.join(cls.dir, name + ".json")
+            with open(scene, "w") as f:
+                f.write('{"voxel_size": %s, "shape": %s}'
+                        % ("0.04" if name == "coarse" else "0.02", shape))
+            r = ivdb("rasterize", scene, "-o", os.path.join(cls.dir, name + ".vdb"), "-q")
+            assert r.returncode == 0, r.stderr
+        # A fog volume on the same lattice, written by OpenVDB.
+        import pyopenvdb as vdb
+        fog = vdb.read(os.path.join(cls.dir, "a.vdb"), "surface")
+        fog.gridClass = vdb.GridClass.FOG_VOLUME
+        fog.name = "density"
+        vdb.write(os.path.join(cls.dir, "fog.vdb"), grids=[fog])
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.dir, ignore_errors=True)
+
+    def blend(self, op, *names, options=(), ranks=(1, 2, 3, 4)):
+        inputs = [self.path(n + ".vdb") for n in names]
+        return self.same_bytes("blend", op, *inputs, *options, ranks=ranks)
+
+    def test_super_elliptic_blends(self):
+        # Sharp (p = 1000), round (p = 20) and wide (p = 8: the blend reaches 30 voxels beyond the
+        # surfaces, into nodes neither input has leaves in).
+        self.blend("union", "a", "b", options=("-p", "1000"))
+        self.blend("union", "a", "b", options=("-p", "20"))
+        self.blend("union", "a", "b", options=("-p", "8"), ranks=(2, 3))
+        self.blend("intersection", "a", "b", options=("-p", "20"), ranks=(1, 3))
+        self.blend("difference", "a", "b", options=("-p", "20"), ranks=(2, 4))
+
+    def test_smooth_blends_and_more_inputs(self):
+        self.blend("union", "a", "b", options=("-k", "0.1"))
+        self.blend("difference", "a", "b", options=("-k", "0.05", "--half"), ranks=(1, 3))
+        # Folded from the left: the second blend's crease is the third sphere's.
+        self.blend("union", "a", "b", "c", options=("-p", "20"), ranks=(1, 2, 4))
+        self.blend("intersection", "a", "b", "c", options=("-k", "0.08"), ranks=(3,))
+
+    def test_summary(self):
+        r = mpi(2, "blend", "union", self.path("a.vdb"), self.path("b.vdb"), "-o",
+                self.path("u.vdb"), "-p", "20", "--per-rank")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("blend union p=20 of 2 level sets", r.stdout)
+        self.assertIn("rank 1:", r.stdout)
+
+    def test_bad_input_fails_on_every_rank_and_writes_nothing(self):
+        a, b = self.path("a.vdb"), self.path("b.vdb")
+        self.assertIn("-p", self.errors(["blend", "union", a, b, "-o", "OUT"]))
+        self.assertIn("excludes", self.errors(["blend", "union", a, b, "-o", "OUT", "-p", "20",
+                                               "-k", "0.1"]))
+        self.assertIn("1000", self.errors(["blend", "union", a, b, "-o", "OUT", "-p", "5000"]))
+        self.assertIn("at least two", self.errors(["blend", "union", a, "-o", "OUT", "-p", "20"]))
+        self.assertIn("coarse.vdb", self.errors(["blend", "union", a, self.path("coarse.vdb"),
+                                                 "-o", "OUT", "-p", "20"]))
+        self.assertIn("no level set", self.errors(["blend", "union", a, self.path("fog.vdb"),
+                                                   "-o", "OUT", "-k", "0.1"]))
 
 
 class TestMpiSequence(MpiCase):

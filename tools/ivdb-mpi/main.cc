@@ -303,10 +303,11 @@ struct CsgArgs
     bool quiet = false, perRank = false, json = false;
 };
 
+/// What csg and blend print: the summary line (or JSON) and, on request, each rank's.
 void printCsg(const CsgArgs& a, const mpi::CsgResult& r)
 {
     if (worldRank() != 0) return;
-    printNotes({}, r.warnings);
+    printNotes(r.notes, r.warnings);
     if (a.json) {
         nlohmann::json out{{"inputs", a.job.inputs}, {"output", a.job.output}, {"op", a.op},
                            {"ranks", r.ranks}, {"nodes", r.nodes}, {"leaves", r.leaves},
@@ -320,13 +321,17 @@ void printCsg(const CsgArgs& a, const mpi::CsgResult& r)
     }
     if (a.quiet) return;
     const std::uint64_t peak = largest(r.rankPeakMemory);
-    std::printf("csg %s of %zu level sets: %llu active voxels on %d ranks, file %s, peak memory "
-                "per rank up to %s, read %.3f s, combine %.3f s, write %.3f s, total %.3f s -> "
+    const std::string what = a.job.p ? "blend " + a.op + " p=" + util::formatNumber(*a.job.p)
+                           : a.job.k ? "smooth " + a.op + " k=" + util::formatNumber(*a.job.k)
+                                     : "csg " + a.op;
+    std::printf("%s of %zu level sets: %llu active voxels on %d ranks, file %s, peak memory "
+                "per rank up to %s, read %.3f s, %s %.3f s, write %.3f s, total %.3f s -> "
                 "%s\n",
-                a.op.c_str(), a.job.inputs.size(), (unsigned long long)r.activeVoxels, r.ranks,
+                what.c_str(), a.job.inputs.size(), (unsigned long long)r.activeVoxels, r.ranks,
                 util::formatBytes(double(r.fileBytes)).c_str(),
-                util::formatBytes(double(peak)).c_str(), r.readSeconds, r.computeSeconds,
-                r.writeSeconds, r.totalSeconds, a.job.output.c_str());
+                util::formatBytes(double(peak)).c_str(), r.readSeconds,
+                a.job.p || a.job.k ? "blend" : "combine", r.computeSeconds, r.writeSeconds,
+                r.totalSeconds, a.job.output.c_str());
     if (a.perRank) {
         for (int k = 0; k < r.ranks; ++k) {
             const std::size_t i = std::size_t(k);
@@ -341,6 +346,24 @@ void printCsg(const CsgArgs& a, const mpi::CsgResult& r)
     std::fflush(stdout);
 }
 
+/// The flags csg and blend share.
+void addCsgFlags(Command& cmd, CsgArgs& a)
+{
+    addCombineInputs(cmd, a.job, a.op, a.compression);
+    addQuietFlag(cmd, a.quiet);
+    cmd.flag("--per-rank", a.perRank, "Also print each rank's nodes, leaves read, leaves, voxels "
+             "and peak memory");
+    cmd.flag("--json", a.json, "Print the summary as JSON, with every rank's figures (bytes)");
+}
+
+int runCsgMpi(CsgArgs& a)
+{
+    a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
+    a.job.op = *implicit::csgOpFromString(a.op);
+    printCsg(a, mpi::csg(MPI_COMM_WORLD, a.job));
+    return 0;
+}
+
 void addCsgMpi(CLI::App& app, Action& action)
 {
     auto a = std::make_shared<CsgArgs>();
@@ -348,17 +371,21 @@ void addCsgMpi(CLI::App& app, Action& action)
         "Sharp CSG of level sets over the MPI ranks (each reads and combines its run of 128^3 "
         "nodes): the file ivdb csg writes, every rank writing its part. The inputs must share "
         "one transform (ivdb csg resamples them)");
-    addCombineInputs(cmd, a->job, a->op, a->compression);
-    addQuietFlag(cmd, a->quiet);
-    cmd.flag("--per-rank", a->perRank, "Also print each rank's nodes, leaves read, leaves, voxels "
-             "and peak memory");
-    cmd.flag("--json", a->json, "Print the summary as JSON, with every rank's figures (bytes)");
-    cmd.onRun(action, [a]() {
-        a->job.write.compression = enumOf<io::Compression>(a->compression, io::compressionNames());
-        a->job.op = *implicit::csgOpFromString(a->op);
-        printCsg(*a, mpi::csg(MPI_COMM_WORLD, a->job));
-        return 0;
-    });
+    addCsgFlags(cmd, *a);
+    cmd.onRun(action, [a]() { return runCsgMpi(*a); });
+}
+
+void addBlendMpi(CLI::App& app, Action& action)
+{
+    auto a = std::make_shared<CsgArgs>();
+    Command cmd(app, "blend",
+        "Blended CSG of level sets over the MPI ranks (-p super-elliptic or -k smooth, as ivdb "
+        "blend): the file ivdb blend writes. Each rank combines its run of 128^3 nodes sharply; "
+        "rank 0 computes the blend around the crease and sends each rank its part. The inputs "
+        "must share one transform (ivdb blend resamples them)");
+    addCsgFlags(cmd, *a);
+    addBlendOptions(cmd, a->job.p, a->job.k, a->job.tolerance);
+    cmd.onRun(action, [a]() { return runCsgMpi(*a); });
 }
 
 } // namespace
@@ -393,14 +420,15 @@ int main(int argc, char** argv)
         }
         ivdb::cli::Program program;
         program.name = "ivdb-mpi";
-        program.description = "ivdb-mpi: ivdb's rasterizing, gradient, curvature and CSG over MPI "
+        program.description = "ivdb-mpi: ivdb's rasterizing, gradient, curvature, CSG and blends over MPI "
                               "ranks, into one .vdb file (run as mpirun -np N ivdb-mpi COMMAND ...)";
-        program.commandList = "rasterize, gradient, curvature, csg";
+        program.commandList = "rasterize, gradient, curvature, csg, blend";
         program.addCommands = [](CLI::App& app, ivdb::cli::Action& action) {
             ivdb::cli::addRasterizeMpi(app, action);
             ivdb::cli::addGradientMpi(app, action);
             ivdb::cli::addCurvatureMpi(app, action);
             ivdb::cli::addCsgMpi(app, action);
+            ivdb::cli::addBlendMpi(app, action);
         };
         program.printsErrors = [rank] { return rank == 0; };
         // Every rank: one being signalled outside an interruptible stretch removes the file it

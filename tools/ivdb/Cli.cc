@@ -308,6 +308,24 @@ void addCombineInputs(Command& cmd, jobs::CombineOptions& job, std::string& op,
     addWriteOptions(cmd, compression, job.write.half);
 }
 
+void addBlendOptions(Command& cmd, std::optional<double>& p, std::optional<double>& k,
+                     double& tolerance)
+{
+    auto* po = cmd.add("-p", p, "Sharpness p in [0.1, 1000], 1/world units (larger is sharper)",
+                       &param::kBlendP);
+    auto* ko = cmd.add("-k,--smooth", k, "Smooth CSG of width k > 0, world units (instead of -p)",
+                       &param::kSmoothK);
+    cmd.name(param::kSmoothK, "-k");
+    po->excludes(ko);
+    cmd.app().parse_complete_callback([po, ko]() {
+        if (po->count() + ko->count() == 0) throw CLI::RequiredError("-p (a blend) or -k (smooth CSG)");
+    });
+    cmd.add("--tolerance", tolerance,
+            "Error allowed on the surface from the bands' limited reach, in voxels",
+            &param::kTolerance)
+        ->capture_default_str();
+}
+
 void addQuietFlag(Command& cmd, bool& quiet)
 {
     cmd.flag("-q,--quiet", quiet, "Do not print the summary line");

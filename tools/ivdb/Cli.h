@@ -178,6 +178,10 @@ void printRasterSummary(const std::string& what, const jobs::RasterizeResult& r,
 void printFrame(const std::string& scene, const jobs::FrameReport& f, std::size_t done,
                 bool quiet, const std::string& maker = "");
 
+/// @brief -p, -k and --tolerance of `blend` (ivdb and ivdb-mpi): exactly one of -p and -k.
+void addBlendOptions(Command& cmd, std::optional<double>& p, std::optional<double>& k,
+                     double& tolerance);
+
 /// @brief The input, output and options of `gradient` (ivdb and ivdb-mpi), bound to @a job and
 /// @a compression.
 void addGradientOptions(Command& cmd, jobs::GradientOptions& job, std::string& compression);

@@ -82,20 +82,7 @@ void addBlend(CLI::App& app, Action& action)
         "band is first extended as far as p or k needs, and the result is re-distanced into a "
         "narrow band 'surface'");
     auto a = addCombineOptions(cmd);
-    auto* p = cmd.add("-p", a->p, "Sharpness p in [0.1, 1000], 1/world units (larger is sharper)",
-                      &param::kBlendP);
-    auto* k = cmd.add("-k,--smooth", a->k,
-                      "Smooth CSG of width k > 0, world units (instead of -p)", &param::kSmoothK);
-    cmd.name(param::kSmoothK, "-k");
-    p->excludes(k);
-    cmd.app().parse_complete_callback([p, k]() {
-        if (p->count() + k->count() == 0) throw CLI::RequiredError("-p (a blend) or -k (smooth CSG)");
-    });
-
-    cmd.add("--tolerance", a->job.tolerance,
-            "Error allowed on the surface from the bands' limited reach, in voxels",
-            &param::kTolerance)
-        ->capture_default_str();
+    addBlendOptions(cmd, a->p, a->k, a->job.tolerance);
     cmd.onRun(action, [a]() { return runCombine(*a, true); });
 }
 

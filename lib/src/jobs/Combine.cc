@@ -12,22 +12,27 @@
 
 namespace ivdb::jobs {
 
-CombineResult combine(const CombineOptions& opt)
+std::optional<ops::BlendSettings> blendSettings(const CombineOptions& opt)
 {
-    Stopwatch clock;
-    ops::BlendSettings blend;
-    const bool blended = opt.p || opt.k;
     if (opt.p && opt.k) {
         throw ParamError(param::kSmoothK, "cannot be given with p: a blend is either "
                                           "super-elliptic (p) or smooth (k)");
     }
+    if (!opt.p && !opt.k) return std::nullopt;
+    ops::BlendSettings blend;
     if (opt.p) check(limits::kBlendP, blend.p = *opt.p);
     if (opt.k) check(limits::kSmoothK, blend.k = *opt.k);
-    if (blended) {
-        blend.tolerance = opt.tolerance;
-        blend.interrupter = opt.interrupter;
-        check(limits::kTolerance, blend.tolerance);
-    }
+    blend.tolerance = opt.tolerance;
+    blend.interrupter = opt.interrupter;
+    check(limits::kTolerance, blend.tolerance);
+    return blend;
+}
+
+CombineResult combine(const CombineOptions& opt)
+{
+    Stopwatch clock;
+    const std::optional<ops::BlendSettings> blend = blendSettings(opt);
+    const bool blended = blend.has_value();
     if (opt.inputs.size() < 2) {
         throw ParamError(param::kInputs, "must be at least two files, got " +
                                              std::to_string(opt.inputs.size()));
@@ -39,7 +44,7 @@ CombineResult combine(const CombineOptions& opt)
     CombineResult result;
     result.readSeconds = clock.lap();
     // In place: the inputs are not needed afterwards.
-    result.surface = blended ? ops::blendInPlace(opt.op, grids, blend, &result.notes)
+    result.surface = blended ? ops::blendInPlace(opt.op, grids, *blend, &result.notes)
                            : ops::csgInPlace(opt.op, grids, &result.notes);
     grids.clear();
     if (result.surface->activeVoxelCount() == 0) {

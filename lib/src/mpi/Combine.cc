@@ -7,6 +7,7 @@
 
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbPieces.h>
+#include <ivdb/ops/Blend.h>
 #include <ivdb/ops/Csg.h>
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
@@ -17,7 +18,9 @@
 #include <algorithm>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
+#include <sstream>
 
 namespace ivdb::mpi {
 
@@ -88,21 +91,27 @@ std::vector<std::uint64_t> gatherOnRoot(MPI_Comm comm, std::vector<T>& items, in
     return counts;
 }
 
-/// The rank's share of the inputs: each input's tree with every 128^3 node not in @a mine
-/// replaced by an active tile (so that no node above it is pruned on this partial view; the
-/// values there are never used), and the leaves of @a mine read.
-openvdb::FloatGrid::Ptr ownPart(io::PartialGrid& part, const std::set<Coord>& mine,
-                                std::uint64_t& leavesRead)
+/// Read the leaves of the 128^3 nodes @a mine of @a part, and those at @a also (origins).
+void loadPart(io::PartialGrid& part, const std::set<Coord>& mine, const std::set<Coord>& also,
+              std::uint64_t& leavesRead)
 {
     std::vector<std::uint64_t> indices;
     const auto& leaves = part.leaves();
     for (std::uint64_t i = 0; i < leaves.size(); ++i) {
-        if (mine.count(leaves[i]->origin() & ~(Int1T::DIM - 1))) indices.push_back(i);
+        const Coord o = leaves[i]->origin();
+        if (mine.count(o & ~(Int1T::DIM - 1)) || also.count(o)) indices.push_back(i);
     }
     part.load(indices);
     part.release();
     part.checkValues(indices);
     leavesRead += indices.size();
+}
+
+/// The rank's share of an input read by loadPart(): its tree with every 128^3 node not in
+/// @a mine replaced by an active tile (so that no node above it is pruned on this partial view;
+/// the values there are never used).
+openvdb::FloatGrid::Ptr ownPart(const io::PartialGrid& part, const std::set<Coord>& mine)
+{
     const openvdb::FloatGrid::Ptr grid = part.grid();
     const float bg = grid->background();
     std::vector<Int2T*> parents;
@@ -116,6 +125,46 @@ openvdb::FloatGrid::Ptr ownPart(io::PartialGrid& part, const std::set<Coord>& mi
     return grid;
 }
 
+/// Rank 0: each rank's share of @a splices (by the rank that owns their 128^3 node, @a owner),
+/// sent; every rank: its own share. Collective.
+std::vector<ops::BlendSplice> shareSplices(MPI_Comm comm, std::vector<ops::BlendSplice>& splices,
+                                           const std::map<Coord, int>& owner)
+{
+    const int rank = rankOf(comm), size = sizeOf(comm);
+    std::vector<std::vector<ops::BlendSplice>> byRank;
+    std::vector<std::uint64_t> counts(std::size_t(size), 0);
+    collective(comm, [&] {
+        if (rank != 0) return;
+        byRank.resize(std::size_t(size));
+        for (ops::BlendSplice& leaf : splices) {
+            const Coord node = Coord(leaf.origin[0], leaf.origin[1], leaf.origin[2]) & ~(Int1T::DIM - 1);
+            const auto it = owner.find(node);
+            if (it == owner.end()) {
+                std::ostringstream os;
+                os << "a blended leaf at " << node << " lies in no rank's 128^3 node";
+                OPENVDB_THROW(openvdb::RuntimeError, os.str());
+            }
+            byRank[std::size_t(it->second)].push_back(leaf);
+        }
+        splices = std::vector<ops::BlendSplice>();
+        for (int k = 0; k < size; ++k) counts[std::size_t(k)] = byRank[std::size_t(k)].size();
+    });
+    std::uint64_t mine = 0;
+    MPI_Scatter(counts.data(), 1, MPI_UINT64_T, &mine, 1, MPI_UINT64_T, 0, comm);
+    std::vector<ops::BlendSplice> out;
+    collective(comm, [&] { if (rank != 0) out.resize(mine); });
+    if (rank == 0) {
+        for (int k = 1; k < size; ++k) {
+            const auto& part = byRank[std::size_t(k)];
+            sendBlob(comm, k, 8, part.data(), part.size() * sizeof(ops::BlendSplice));
+        }
+        out = std::move(byRank[0]);
+    } else {
+        recvBlob(comm, 0, 8, out.data(), out.size() * sizeof(ops::BlendSplice));
+    }
+    return out;
+}
+
 } // namespace
 
 CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
@@ -125,20 +174,20 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     CsgResult result;
     result.ranks = size;
 
-    // Every rank: the inputs' topologies, no values.
+    // Every rank: the inputs' topologies, no values (and a blend's crease, found from them).
     std::vector<std::unique_ptr<io::PartialGrid>> parts;
+    std::optional<ops::BlendSettings> blend;
+    std::unique_ptr<ops::BlendCrease> crease;
     collective(comm, [&] {
-        if (opt.p || opt.k) {
-            throw ParamError(opt.p ? param::kBlendP : param::kSmoothK, "blends run in one process "
-                             "(ivdb blend); ivdb-mpi combines sharply");
-        }
+        blend = jobs::blendSettings(opt);
+        if (blend && rank != 0) blend->interrupter = nullptr;
         if (opt.inputs.size() < 2) {
             throw ParamError(param::kInputs, "must be at least two files, got " +
                                                  std::to_string(opt.inputs.size()));
         }
         if (opt.fog) {
             OPENVDB_THROW(openvdb::ValueError, "a fog volume is made in one process (plain ivdb's "
-                          "csg); ivdb-mpi writes the level set");
+                          "csg and blend); ivdb-mpi writes the level set");
         }
         if (rank == 0 && !opt.output.empty()) io::checkOutputPath(opt.output);
         for (const std::string& path : opt.inputs) {
@@ -159,15 +208,26 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
                                  "them", opt.inputs[i]);
             }
         }
+        if (blend) {
+            crease = std::make_unique<ops::BlendCrease>(grids, *blend);
+            result.notes.push_back(crease->note());
+            if (crease->empty()) crease.reset();
+        }
     });
 
-    // The 128^3 nodes any input holds, in file order, weighed by their leaves (and one each).
+    // The 128^3 nodes any input holds, in file order, weighed by their leaves (and one each);
+    // for a blend also those its crease may write leaves into, which the inputs may not hold.
     std::map<Coord, std::uint64_t> weight;
     for (const auto& p : parts) {
         for (const LeafT* leaf : p->leaves()) ++weight[leaf->origin() & ~(Int1T::DIM - 1)];
         std::vector<const Int1T*> nodes;
         p->grid()->tree().getNodes(nodes);
         for (const Int1T* n : nodes) weight[n->origin()] += 1;
+    }
+    std::set<Coord> held; // the nodes an input holds
+    for (const auto& w : weight) held.insert(w.first);
+    if (crease) {
+        for (const Coord& o : crease->leavesWritten()) weight[o & ~(Int1T::DIM - 1)] += 1;
     }
     std::vector<std::pair<Coord, std::uint64_t>> units(weight.begin(), weight.end());
     weight.clear();
@@ -179,30 +239,62 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     for (const auto& u : units) total += u.second;
     // Rank r: the nodes whose weight before them lies in [total r / N, total (r + 1) / N).
     std::vector<Coord> mineInOrder;
+    std::map<Coord, int> owner; // a blend's: every node's rank
     {
         std::uint64_t before = 0;
-        const std::uint64_t lo = total * std::uint64_t(rank) / std::uint64_t(size);
-        const std::uint64_t hi = total * std::uint64_t(rank + 1) / std::uint64_t(size);
+        int r = 0;
         for (const auto& u : units) {
-            if (before >= lo && before < hi) mineInOrder.push_back(u.first);
+            while (r + 1 < size &&
+                   before >= total * std::uint64_t(r + 1) / std::uint64_t(size)) {
+                ++r;
+            }
+            if (r == rank) mineInOrder.push_back(u.first);
+            if (crease) owner.emplace(u.first, r);
             before += u.second;
         }
     }
     units.clear();
     const std::set<Coord> mine(mineInOrder.begin(), mineInOrder.end());
 
-    // Each rank: its nodes' leaves, and the CSG of its part.
+    // Each rank: its nodes' leaves; rank 0 also those the blend's crease reads, and computes
+    // the crease's values, which go to the ranks owning their nodes.
     std::uint64_t leavesRead = 0;
-    openvdb::FloatGrid::Ptr combined;
-    std::vector<std::string> notes;
     double readSeconds = 0.0;
+    std::vector<ops::BlendSplice> splices;
     collective(comm, [&] {
         std::vector<openvdb::FloatGrid::Ptr> grids;
-        for (auto& p : parts) grids.push_back(ownPart(*p, mine, leavesRead));
-        parts.clear();
+        for (std::size_t i = 0; i < parts.size(); ++i) {
+            std::set<Coord> also;
+            if (crease && rank == 0) {
+                for (const Coord& o : crease->leavesRead(i)) also.insert(o);
+            }
+            loadPart(*parts[i], mine, also, leavesRead);
+            grids.push_back(parts[i]->grid());
+        }
         readSeconds = secondsSince(start);
-        combined = ops::csgInPlace(opt.op, grids, &notes);
+        if (crease && rank == 0) splices = crease->compute(opt.op, grids, blend->interrupter);
     });
+    if (crease) splices = shareSplices(comm, splices, owner);
+    owner.clear();
+
+    // Each rank: the CSG of its part, and the blend's values in its nodes.
+    openvdb::FloatGrid::Ptr combined;
+    std::vector<std::string> notes;
+    collective(comm, [&] {
+        std::vector<openvdb::FloatGrid::Ptr> grids;
+        for (auto& p : parts) grids.push_back(ownPart(*p, mine));
+        parts.clear();
+        // A blend's sharp part, as ops::blend() runs it (its notes are the blend's).
+        combined = ops::csgInPlace(opt.op, grids, blend ? nullptr : &notes);
+        if (crease) {
+            // Pruned here as ops::blend() prunes the whole (leaves the splice made uniform
+            // become tiles); rank 0 prunes what lies above the nodes.
+            ops::spliceBlend(combined->tree(), splices);
+            openvdb::tools::pruneLevelSet(combined->tree());
+        }
+        splices = std::vector<ops::BlendSplice>();
+    });
+    if (!blend) result.notes.insert(result.notes.end(), notes.begin(), notes.end());
     const double computeSeconds = secondsSince(start) - readSeconds;
     const auto writeStart = Clock::now();
 
@@ -244,6 +336,8 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
                 for (auto it = n->cbeginChildOn(); it; ++it) leaves.push_back(it.getCoord());
                 for (const Coord& c : leaves) own->tree().addLeaf(n->stealNode<LeafT>(c, 0.0f, true));
                 tables.push_back(t);
+            } else if (!held.count(o)) {
+                continue; // a node only a blend could have made, and did not: as the inputs
             } else {
                 r.tile = tree.getValue(o);
                 r.active = tree.isValueOn(o) ? 1 : 0;

@@ -3,6 +3,7 @@
 
 #include <ivdb/implicit/CsgOp.h>
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/ops/Blend.h>
 #include <ivdb/util/Interrupt.h>
 
 #include <openvdb/openvdb.h>
@@ -28,6 +29,10 @@ struct CombineOptions
     io::WriteOptions write;                ///< compression and half floats on disk
     util::Interrupter* interrupter = nullptr;
 };
+
+/// @brief The blend @a options ask for (p or k set), checked; none for the sharp operation.
+/// @throw ParamError for both p and k, or a bad p, k or tolerance
+std::optional<ops::BlendSettings> blendSettings(const CombineOptions& options);
 
 struct CombineResult
 {

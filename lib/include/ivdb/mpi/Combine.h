@@ -19,6 +19,7 @@ struct CsgResult
     std::uint64_t leaves = 0;          ///< the result's
     std::uint64_t activeVoxels = 0;    ///< the result's
     std::uint64_t fileBytes = 0;
+    std::vector<std::string> notes;    ///< the operation's: a narrowed band, a blend's extension
     std::vector<std::string> warnings; ///< an empty result
     double readSeconds = 0.0;          ///< topologies and the rank's leaves (the slowest rank)
     double computeSeconds = 0.0;       ///< the CSG of the rank's nodes (the slowest rank)
@@ -30,8 +31,8 @@ struct CsgResult
         rankPeakMemory;
 };
 
-/// @brief jobs::combine()'s sharp CSG over the ranks of @a comm, into one .vdb file that all of
-/// them write at once: the file jobs::combine() writes, byte for byte but its random UUID.
+/// @brief jobs::combine()'s sharp CSG or blend over the ranks of @a comm, into one .vdb file that
+/// all of them write at once: the file jobs::combine() writes, byte for byte but its random UUID.
 /// @details CSG is a value-by-value operation, and OpenVDB's (which ops::csg runs) decides each
 /// 128^3 node of the result from the inputs' same node and the tiles above it. So every rank reads
 /// the inputs' topologies (io::PartialGrid), splits the 128^3 nodes that any input holds into
@@ -41,10 +42,15 @@ struct CsgResult
 /// (its tiles and which slots are leaves, or the tile it became) and the leaves' table entries,
 /// builds the grid's nodes and tiles, prunes them as OpenVDB prunes a level set, and the ranks
 /// write the file as rasterize() does.
+/// A blend (p or k) is the sharp operation but around the crease (ops::BlendCrease): every rank
+/// finds the crease from the topologies, and its 128^3 nodes join the split; rank 0 reads the
+/// inputs' leaves near the crease as well as its own, computes the blend's values there as
+/// ops::blend() does and sends each rank those in its nodes, which it sets into its sharp
+/// result (ops::spliceBlend) before reporting its nodes.
 /// Collective: call it on every rank with the same options.
 /// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own): the
-/// errors of jobs::combine(); ParamError for a blend (p or k), which plain ivdb makes, and for
-/// inputs on different transforms (plain ivdb resamples them); openvdb::ValueError for a fog
+/// errors of jobs::combine(); ParamError for inputs on different transforms (plain ivdb
+/// resamples them); openvdb::ValueError for a fog
 /// volume (plain ivdb's) and for a level set with active tiles. Nothing is written on any error.
 CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& options);
 
