@@ -6,6 +6,7 @@
 #include <openvdb/io/File.h>
 #include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Diagnostics.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
 #include <gtest/gtest.h>
@@ -19,7 +20,9 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -566,6 +569,79 @@ TEST_F(TestVdbFile, DescribeGrid)
     EXPECT_EQ(r.activeVoxels, info.activeVoxels);
     EXPECT_EQ(r.indexBox, info.indexBox);
     EXPECT_EQ(r.gridClass, "level set");
+}
+
+// Every value a command reads is checked finite wherever it lies: an inactive voxel, an active
+// one, a tile of a 128^3 node, of a 4096^3 node and of the root, the background; in float,
+// double and vector grids (one component). OpenVDB's Diagnose (a reference that walks every
+// value through its iterators) agrees on each.
+TEST_F(TestVdbFile, ValuesThatAreNotFiniteAreFoundWhereverTheyLie)
+{
+    const float kBad[] = {std::numeric_limits<float>::quiet_NaN(),
+                          std::numeric_limits<float>::infinity(),
+                          -std::numeric_limits<float>::infinity()};
+    const auto refused = [](const openvdb::GridBase& g) {
+        try {
+            ivdb::io::checkGridValues(g, "x.vdb");
+        } catch (const openvdb::ValueError& e) {
+            EXPECT_NE(std::string(e.what()).find("not finite"), std::string::npos) << e.what();
+            return true;
+        }
+        return false;
+    };
+    const auto sphere = [] {
+        return openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(1.0f, openvdb::Vec3f(0.0f),
+                                                                        0.05f);
+    };
+    ASSERT_FALSE(refused(*sphere()));
+    for (float bad : kBad) {
+        using Setter = std::function<void(openvdb::FloatGrid&)>;
+        const std::vector<std::pair<const char*, Setter>> places{
+            {"an inactive voxel", [&](openvdb::FloatGrid& g) {
+                 auto* leaf = g.tree().probeLeaf(openvdb::Coord(20, 0, 0));
+                 ASSERT_NE(leaf, nullptr);
+                 const openvdb::Index m = leaf->beginValueOff().pos();
+                 leaf->setValueOnly(m, bad);
+             }},
+            {"an active voxel", [&](openvdb::FloatGrid& g) {
+                 g.tree().setValueOn(openvdb::Coord(20, 0, 0), bad);
+             }},
+            {"a tile of a 128^3 node", [&](openvdb::FloatGrid& g) {
+                 g.tree().addTile(1, openvdb::Coord(0, 0, 0), bad, false);
+             }},
+            {"a tile of a 4096^3 node", [&](openvdb::FloatGrid& g) {
+                 g.tree().addTile(2, openvdb::Coord(128, 128, 128), bad, false);
+             }},
+            {"a root tile", [&](openvdb::FloatGrid& g) {
+                 g.tree().addTile(3, openvdb::Coord(8192, 0, 0), bad, true);
+             }},
+            {"the background", [&](openvdb::FloatGrid& g) {
+                 g.tree().root().setBackground(bad, /*updateChildNodes=*/false);
+             }}};
+        for (const auto& [where, set] : places) {
+            auto g = sphere();
+            set(*g);
+            EXPECT_TRUE(refused(*g)) << where << " " << bad;
+            // The reference: OpenVDB's own check over every value.
+            openvdb::tools::Diagnose<openvdb::FloatGrid> diagnose(*g);
+            openvdb::tools::CheckFinite<openvdb::FloatGrid, openvdb::FloatGrid::ValueAllCIter> finite;
+            EXPECT_FALSE(diagnose.check(finite, false, true, true, true).empty()) << where;
+        }
+        auto d = openvdb::DoubleGrid::create(0.0);
+        d->tree().setValueOn(openvdb::Coord(3, 4, 5), 1.0);
+        ASSERT_FALSE(refused(*d));
+        d->tree().setValueOff(openvdb::Coord(3, 4, 6), double(bad));
+        EXPECT_TRUE(refused(*d)) << bad;
+        for (int c = 0; c < 3; ++c) {
+            auto v = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+            v->tree().setValueOn(openvdb::Coord(-9, 1, 2), openvdb::Vec3s(1.0f, 2.0f, 3.0f));
+            ASSERT_FALSE(refused(*v));
+            openvdb::Vec3s value(1.0f, 2.0f, 3.0f);
+            value[c] = bad;
+            v->tree().setValueOn(openvdb::Coord(-9, 1, 7), value);
+            EXPECT_TRUE(refused(*v)) << "component " << c << " " << bad;
+        }
+    }
 }
 
 } // namespace

@@ -488,14 +488,14 @@ class TestMpiBlend(MpiCase):
     def test_super_elliptic_blends(self):
         # Sharp (p = 1000), round (p = 20) and wide (p = 8: the blend reaches 30 voxels beyond the
         # surfaces, into nodes neither input has leaves in).
-        self.blend("union", "a", "b", options=("-p", "1000"))
+        self.blend("union", "a", "b", options=("-p", "1000"), ranks=(1, 3))
         self.blend("union", "a", "b", options=("-p", "20"))
         self.blend("union", "a", "b", options=("-p", "8"), ranks=(2, 3))
         self.blend("intersection", "a", "b", options=("-p", "20"), ranks=(1, 3))
         self.blend("difference", "a", "b", options=("-p", "20"), ranks=(2, 4))
 
     def test_smooth_blends_and_more_inputs(self):
-        self.blend("union", "a", "b", options=("-k", "0.1"))
+        self.blend("union", "a", "b", options=("-k", "0.1"), ranks=(2, 4))
         self.blend("difference", "a", "b", options=("-k", "0.05", "--half"), ranks=(1, 3))
         # Folded from the left: the second blend's crease is the third sphere's.
         self.blend("union", "a", "b", "c", options=("-p", "20"), ranks=(1, 2, 4))

@@ -6,10 +6,15 @@
 
 #include <openvdb/tools/Diagnostics.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
 #include <cmath>
+#include <cstddef>
+#include <limits>
 #include <mutex>
-#include <vector>
 #include <sstream>
+#include <vector>
 
 namespace ivdb::io {
 
@@ -23,10 +28,59 @@ std::string oneLine(std::string text)
     return out;
 }
 
-/// Every value (background, tiles, voxels, active or not) finite; OpenVDB's threaded diagnostics.
+/// Whether the @a count numbers from @a values are all finite: a loop the compiler vectorizes
+/// (a NaN fails the comparison, an infinity exceeds the largest finite number).
+template<typename T>
+bool allFinite(const T* values, std::size_t count)
+{
+    bool ok = true;
+    for (std::size_t i = 0; i < count; ++i) ok &= std::abs(values[i]) <= std::numeric_limits<T>::max();
+    return ok;
+}
+
+/// Whether every value of @a grid (background, tiles, voxels, active or not) is finite: the
+/// leaves' buffers in parallel, read as arrays of their numbers (a scalar or a vector's
+/// components). This is the pass every command's input takes; OpenVDB's Diagnose, which also
+/// says where a value is not finite, took about ten times as long and runs only on a failure.
+template<typename GridT>
+bool allFinite(const GridT& grid)
+{
+    using TreeT = typename GridT::TreeType;
+    using LeafT = typename TreeT::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
+    using Number = typename openvdb::VecTraits<ValueT>::ElementType;
+    constexpr std::size_t kNumbers = sizeof(ValueT) / sizeof(Number);
+    static_assert(kNumbers * sizeof(Number) == sizeof(ValueT), "a value is an array of numbers");
+    const auto finite = [](const ValueT& v) {
+        return allFinite(reinterpret_cast<const Number*>(&v), kNumbers);
+    };
+    if (!finite(grid.background())) return false;
+    typename TreeT::ValueAllCIter tiles = grid.tree().cbeginValueAll();
+    tiles.setMaxDepth(TreeT::ValueAllCIter::LEAF_DEPTH - 1); // the root's and nodes' tiles
+    for (; tiles; ++tiles) {
+        if (!finite(*tiles)) return false;
+    }
+    std::vector<const LeafT*> leaves;
+    leaves.reserve(grid.tree().leafCount());
+    grid.tree().getNodes(leaves);
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, leaves.size()), true,
+        [&](const tbb::blocked_range<std::size_t>& r, bool ok) {
+            for (std::size_t k = r.begin(); ok && k < r.end(); ++k) {
+                const ValueT* values = leaves[k]->buffer().data();
+                ok = allFinite(reinterpret_cast<const Number*>(values), LeafT::SIZE * kNumbers);
+            }
+            return ok;
+        },
+        [](bool a, bool b) { return a && b; });
+}
+
+/// Every value (background, tiles, voxels, active or not) finite; where one is not, OpenVDB's
+/// threaded diagnostics say where.
 template<typename GridT>
 void checkFinite(const GridT& grid, const std::string& what)
 {
+    if (allFinite(grid)) return;
     openvdb::tools::Diagnose<GridT> diagnose(grid);
     openvdb::tools::CheckFinite<GridT, typename GridT::ValueAllCIter> finite;
     const std::string found = diagnose.check(finite, /*updateMask=*/false, /*voxels=*/true,
