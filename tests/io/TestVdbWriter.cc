@@ -7,6 +7,7 @@
 #include "Grids.h"
 
 #include <ivdb/diff/Differential.h>
+#include <ivdb/levelset/Fog.h>
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
@@ -23,6 +24,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
+#include <memory>
 #include <string>
 
 #include <tbb/global_control.h>
@@ -187,6 +190,47 @@ std::vector<typename GridT::Ptr> leafRuns(const GridT& grid, int runs)
     return out;
 }
 
+/// The file @a head lays out with each grid's runs @a runs[g] (their masks and buffers), as the
+/// ranks write it; fails the test if a byte is not written exactly once.
+std::string assembled(const ivdb::io::FileHead& head,
+                      const std::vector<std::vector<ivdb::io::LeafRun>>& runs,
+                      const std::string& what)
+{
+    std::string file(head.fileBytes, '\0');
+    std::vector<int> writes(file.size(), 0);
+    const auto put = [&](std::uint64_t at, const char* data, std::uint64_t n) {
+        EXPECT_LE(at + n, file.size()) << what;
+        if (at + n > file.size()) return;
+        file.replace(at, n, data, n);
+        for (std::uint64_t i = at; i < at + n; ++i) ++writes[i];
+    };
+    for (const auto& p : head.nonMaskParts()) put(p.offset, p.data, p.size);
+    for (std::size_t g = 0; g < runs.size(); ++g) {
+        std::uint64_t leaf = 0, at = head.grids[g].buffersAt();
+        for (const auto& run : runs[g]) {
+            for (const auto& [o, data] : head.maskWrites(g, leaf, run.masks)) put(o, data.data(), data.size());
+            leaf += run.masks.size();
+            for (const auto& piece : run.pieces) {
+                put(at, piece.data(), piece.size());
+                at += piece.size();
+            }
+        }
+    }
+    EXPECT_EQ(std::count(writes.begin(), writes.end(), 1), std::ptrdiff_t(file.size())) << what;
+    return file;
+}
+
+/// The first byte where two files differ but for the UUID (their size if none).
+std::size_t firstDifference(std::string a, std::string b)
+{
+    if (a.size() != b.size()) return 0;
+    a.replace(21, 36, 36, '-');
+    b.replace(21, 36, 36, '-');
+    std::size_t first = 0;
+    while (first < a.size() && a[first] == b[first]) ++first;
+    return first;
+}
+
 } // namespace
 
 TEST_F(TestVdbWriter, PiecesMakeTheSameFile)
@@ -322,33 +366,89 @@ TEST_F(TestVdbWriter, PiecesMakeTheSameFileOfSeveralGrids)
             }
             const ivdb::io::FileHead head = ivdb::io::vdbFileHead(heads, meta, options);
             ASSERT_EQ(head.grids.size(), 3u);
-            std::string file(head.fileBytes, '\0');
-            std::vector<int> writes(file.size(), 0);
-            const auto put = [&](std::uint64_t at, const char* data, std::uint64_t n) {
-                ASSERT_LE(at + n, file.size()) << what;
-                file.replace(at, n, data, n);
-                for (std::uint64_t i = at; i < at + n; ++i) ++writes[i];
-            };
-            for (const auto& p : head.nonMaskParts()) put(p.offset, p.data, p.size);
-            for (std::size_t g = 0; g < 3; ++g) {
-                std::uint64_t leaf = 0, at = head.grids[g].buffersAt();
-                for (const auto& run : runs[g]) {
-                    for (const auto& [o, data] : head.maskWrites(g, leaf, run.masks)) put(o, data.data(), data.size());
-                    leaf += run.masks.size();
-                    for (const auto& piece : run.pieces) {
-                        put(at, piece.data(), piece.size());
-                        at += piece.size();
-                    }
-                }
-            }
-            EXPECT_EQ(std::count(writes.begin(), writes.end(), 1), std::ptrdiff_t(file.size())) << what;
-            std::string a = bytes(path("whole.vdb"));
+            const std::string file = assembled(head, runs, what);
+            const std::string a = bytes(path("whole.vdb"));
             ASSERT_EQ(a.size(), file.size()) << what;
-            a.replace(21, 36, 36, '-');
-            file.replace(21, 36, 36, '-');
-            std::size_t first = 0;
-            while (first < a.size() && a[first] == file[first]) ++first;
+            const std::size_t first = firstDifference(a, file);
             EXPECT_EQ(first, a.size()) << what << ": first difference at byte " << first;
         }
+    }
+}
+
+TEST_F(TestVdbWriter, PiecesMakeTheSameFileWithAFogVolume)
+{
+    // What ivdb-mpi rasterize --fog writes: the level set and its fog volume (fogFromLevelSet),
+    // the fog made leaf by leaf in runs (levelset::fogLeaf), its ramp's end from the whole grid
+    // (fogCutoff) and its nodes and tiles from the level set's skeleton (fogSkeleton): inside
+    // tiles active in 128^3 and 4096^3 nodes (a sphere of radius 333 voxels), a sphere with no
+    // inside tile at the leaves' level, and one whose voxels never reach -background (the ramp
+    // ends at its lowest value).
+    auto big = sphere(1.0f, 0.003f, "surface");
+    auto small = sphere(0.3f, 0.02f, "surface");
+    auto tiny = sphere(0.04f, 0.02f, "surface");
+    openvdb::MetaMap meta;
+    meta.insertMeta("creator", openvdb::StringMetadata("test"));
+    for (const auto& grid : {big, small, tiny}) {
+        openvdb::tools::signedFloodFill(grid->tree());
+        openvdb::tools::pruneLevelSet(grid->tree());
+        grid->insertMeta("ivdb_source", openvdb::StringMetadata("a test"));
+        const auto fog = ivdb::levelset::fogFromLevelSet(*grid);
+        const auto skeleton = ivdb::io::skeletonOf(*grid);
+        const std::string name = grid == big ? "big" : grid == small ? "small" : "tiny";
+        for (bool half : {false, true}) {
+            if (grid == big && half) continue;
+            ivdb::io::WriteOptions options;
+            options.half = half;
+            const std::string what = name + (half ? ", half" : "");
+            ivdb::io::writeVdb(path("whole.vdb"), {grid, fog}, meta, options);
+            const auto parts = leafRuns(*grid, 3);
+            float lowest = std::numeric_limits<float>::max();
+            for (const auto& part : parts) lowest = std::min(lowest, ivdb::levelset::lowestValue(part->tree()));
+            const float cutoff = ivdb::levelset::fogCutoff(*skeleton, lowest);
+            if (grid == tiny) EXPECT_GT(cutoff, -grid->background()) << what;
+            else EXPECT_EQ(cutoff, -grid->background()) << what;
+            std::vector<std::vector<ivdb::io::LeafRun>> runs(2);
+            std::vector<ivdb::io::LeafRun> all(2);
+            std::vector<std::uint8_t> kept;
+            for (const auto& part : parts) {
+                runs[0].push_back(ivdb::io::encodeLeafRun(*part, options));
+                all[0].appendEntries(runs[0].back());
+                auto fogPart = openvdb::FloatGrid::create(0.0f);
+                fogPart->setGridClass(openvdb::GRID_FOG_VOLUME);
+                for (auto it = part->tree().cbeginLeaf(); it; ++it) {
+                    auto leaf = std::make_unique<openvdb::FloatTree::LeafNodeType>(*it);
+                    kept.push_back(ivdb::levelset::fogLeaf(*leaf, cutoff) ? 1 : 0);
+                    if (kept.back()) fogPart->tree().addLeaf(leaf.release());
+                }
+                runs[1].push_back(ivdb::io::encodeLeafRun(*fogPart, options));
+                all[1].appendEntries(runs[1].back());
+            }
+            EXPECT_EQ(all[1].masks.size(), fog->tree().leafCount()) << what;
+            EXPECT_LT(all[1].masks.size(), all[0].masks.size()) << what;
+            ivdb::io::ActiveTiles tiles;
+            const auto fogSkeleton = ivdb::levelset::fogSkeleton(*skeleton, kept, tiles);
+            if (grid == big) {
+                EXPECT_FALSE(tiles.empty()) << what;
+                openvdb::FloatTree::ValueOnCIter above = fogSkeleton->tree().cbeginValueOn();
+                above.setMaxDepth(openvdb::FloatTree::ValueOnCIter::LEAF_DEPTH - 2);
+                EXPECT_TRUE(bool(above)) << what << ": an inside tile above the 128^3 nodes";
+            }
+            std::vector<ivdb::io::HeadGrid> heads;
+            for (std::size_t g = 0; g < 2; ++g) {
+                std::uint64_t n = 0;
+                for (const auto& r : runs[g]) n += r.byteCount();
+                heads.push_back({g == 0 ? openvdb::GridBase::ConstPtr(skeleton) : fogSkeleton,
+                                 &all[g], n, g == 0 ? nullptr : &tiles});
+            }
+            const ivdb::io::FileHead head = ivdb::io::vdbFileHead(heads, meta, options);
+            const std::string file = assembled(head, runs, what);
+            const std::string a = bytes(path("whole.vdb"));
+            ASSERT_EQ(a.size(), file.size()) << what;
+            const std::size_t first = firstDifference(a, file);
+            EXPECT_EQ(first, a.size()) << what << ": first difference at byte " << first;
+        }
+        // A skeleton and a list of kept leaves that do not match are refused.
+        ivdb::io::ActiveTiles tiles;
+        EXPECT_THROW(ivdb::levelset::fogSkeleton(*skeleton, {1}, tiles), openvdb::ValueError);
     }
 }

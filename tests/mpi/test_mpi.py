@@ -152,6 +152,29 @@ class TestMpiRasterize(MpiCase):
         self.assertEqual(grid.gridClass, vdb.GridClass.LEVEL_SET)
         self.assertGreater(grid.activeVoxelCount(), 100000)
 
+    def test_fog_volume(self):
+        # --fog: the 'density' grid plain ivdb makes (OpenVDB's sdfToFogVolume), each rank
+        # turning its own leaves into the fog's: a sphere 666 voxels across (inside tiles active
+        # in 128^3 and 4096^3 nodes), a union, half floats with zip, and a sphere 4 voxels across
+        # whose voxels never reach the band's inner edge (the ramp ends at its lowest value).
+        out = self.same_as_ivdb(data("sphere.json"), "--fog", "--voxel-size", "0.003", ranks=(1, 3))
+        import pyopenvdb as vdb
+        fog = vdb.read(out, "density")
+        self.assertEqual(fog.gridClass, vdb.GridClass.FOG_VOLUME)
+        acc = fog.getAccessor()
+        self.assertEqual(acc.getValue((0, 0, 0)), 1.0)  # deep inside: an active tile
+        self.assertTrue(acc.isValueOn((0, 0, 0)))
+        self.assertEqual(acc.getValue((400, 0, 0)), 0.0)  # outside
+        self.assertGreater(acc.getValue((332, 0, 0)), 0.0)  # the ramp, just inside the surface
+        self.assertLess(acc.getValue((332, 0, 0)), 1.0)
+        self.same_as_ivdb(data("fig1_union.json"), "--fog")
+        self.same_as_ivdb(data("fig5_blend_union.json"), "--fog", "--half", "--compression", "zip",
+                          "--voxel-size", "0.02", ranks=(2, 4))
+        tiny = self.path("tiny.json")
+        with open(tiny, "w") as f:
+            f.write('{"voxel_size": 0.02, "shape": {"type": "sphere", "radius": 0.04}}')
+        self.same_as_ivdb(tiny, "--fog", ranks=(1, 3))
+
     def test_per_rank_report(self):
         r = mpi(3, "rasterize", data("sphere.json"), "-o", self.path("s.vdb"), "--per-rank")
         self.assertEqual(r.returncode, 0, r.stderr)
@@ -578,6 +601,22 @@ class TestMpiSequence(MpiCase):
         self.assertTrue(all("(rank " in l for l in lines), lines)
         self.assertIn("%d frames written, 0 skipped on 3 ranks" % len(self.FRAMES), r.stdout)
         self.assertEqual(len([l for l in r.stdout.splitlines() if l.startswith("  rank ")]), 3)
+
+    def test_frames_with_a_fog_volume(self):
+        # --fog on a sequence: each frame's file holds the level set and its fog, as plain ivdb's.
+        plain = os.path.join(self.dir, "fog_ivdb")
+        os.makedirs(plain, exist_ok=True)
+        r = ivdb("rasterize", self.scene, "--frames", "1-48:12", "--voxel-size", "0.03", "--fog",
+                 "-o", os.path.join(plain, "m_####.vdb"), "-q")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        out = os.path.join(self.dir, "fog_mpi")
+        os.makedirs(out, exist_ok=True)
+        r = mpi(3, "rasterize", self.scene, "--frames", "1-48:12", "--voxel-size", "0.03", "--fog",
+                "-o", os.path.join(out, "m_####.vdb"))
+        self.assertEqual(r.returncode, 0, r.stderr)
+        for frame in range(1, 49, 12):
+            name = "m_%04d.vdb" % frame
+            self.assertEqual(masked(os.path.join(out, name)), masked(os.path.join(plain, name)), name)
 
     def test_more_ranks_than_frames(self):
         import json

@@ -188,6 +188,7 @@ void addRasterizeMpi(CLI::App& app, Action& action)
         ->required();
     addSequenceOptions(cmd, a->seq);
     addRasterSettings(cmd, a->job, a->distance);
+    addFogFlag(cmd, a->job.fog);
     addWriteOptions(cmd, a->compression, a->job.write.half);
     addQuietFlag(cmd, a->quiet);
     cmd.flag("--per-rank", a->perRank, "Also print each rank's leaves, voxels and peak memory "

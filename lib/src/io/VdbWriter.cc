@@ -790,10 +790,12 @@ void writeNodeTable(std::ostream& os, const typename NodeT::NodeMaskType& childM
 
 /// Tree::writeTopology of the grid @a skeleton stands for: its 128^3 nodes' active tiles are
 /// leaves, of which there are @a leafCount; their value masks are written as zeros, and where
-/// they go is recorded in @a runs (offsets from @a base, the stream's start in the file).
+/// they go is recorded in @a runs (offsets from @a base, the stream's start in the file). The
+/// grid's own active tiles in those nodes are @a ownTiles' (if any).
 template<typename TreeT>
 void writeSkeletonTopology(std::ostream& os, const TreeT& skeleton, std::uint64_t leafCount,
-                           bool toHalf, std::uint64_t base, std::vector<FileHead::MaskRun>& runs)
+                           bool toHalf, std::uint64_t base, std::vector<FileHead::MaskRun>& runs,
+                           const ActiveTiles* ownTiles)
 {
     using ValueT = typename TreeT::ValueType;
     using Int2T = typename TreeT::RootNodeType::ChildNodeType;
@@ -825,17 +827,22 @@ void writeSkeletonTopology(std::ostream& os, const TreeT& skeleton, std::uint64_
             const openvdb::Coord o = it2.getCoord();
             os.write(reinterpret_cast<const char*>(o.asPointer()), 3 * sizeof(std::int32_t));
             const Int2T& n2 = *it2;
-            if (!n2.getValueMask().isOff()) {
-                OPENVDB_THROW(openvdb::ValueError, "a skeleton has an active tile above its "
-                              "128^3 nodes");
-            }
             writeNodeTable<Int2T>(os, n2.getChildMask(), n2.getValueMask(),
                 [&](openvdb::Index i) { return n2.getValue(n2.offsetToGlobalCoord(i)); }, toHalf);
             for (auto it1 = n2.cbeginChildOn(); it1; ++it1) {
                 const Int1T& n1 = *it1;
                 // The active tiles are the leaves: they become the child mask.
                 const typename Int1T::NodeMaskType leaves = n1.getValueMask();
-                writeNodeTable<Int1T>(os, leaves, typename Int1T::NodeMaskType(),
+                typename Int1T::NodeMaskType active;
+                if (ownTiles) {
+                    const auto found = ownTiles->find(n1.origin());
+                    if (found != ownTiles->end()) active = found->second;
+                }
+                if (!(leaves & active).isOff()) {
+                    OPENVDB_THROW(openvdb::ValueError, "a skeleton lists an active tile where it "
+                                  "has a leaf");
+                }
+                writeNodeTable<Int1T>(os, leaves, active,
                     [&](openvdb::Index i) { return n1.getValue(n1.offsetToGlobalCoord(i)); }, toHalf);
                 const std::uint64_t count = leaves.countOn();
                 if (count == 0) continue;
@@ -857,7 +864,8 @@ void writeSkeletonTopology(std::ostream& os, const TreeT& skeleton, std::uint64_
 template<typename GridT>
 void writeGridHead(std::ostream& os, std::string& out, std::uint64_t at, const std::string& name,
                    const GridT& grid, const LeafRun& leaves, std::uint64_t bufferBytes,
-                   std::uint32_t flags, std::vector<FileHead::MaskRun>& runs)
+                   std::uint32_t flags, std::vector<FileHead::MaskRun>& runs,
+                   const ActiveTiles* activeTiles)
 {
     using LeafT = typename GridT::TreeType::LeafNodeType;
     const bool half = grid.saveFloatAsHalf();
@@ -880,18 +888,43 @@ void writeGridHead(std::ostream& os, std::string& out, std::uint64_t at, const s
         hs.copyfmt(os);
         openvdb::io::setDataCompression(hs, gridFlags);
         grid.writeTransform(hs);
-        writeSkeletonTopology(hs, grid.tree(), n, half, 0, runs);
+        writeSkeletonTopology(hs, grid.tree(), n, half, 0, runs, activeTiles);
+    }
+    // The statistics io::File adds: the active voxels and their box, the grid's own active tiles'
+    // included (those above the 128^3 nodes, and the listed ones in them).
+    std::uint64_t activeVoxels = leaves.activeVoxels;
+    openvdb::CoordBBox activeBox = leaves.activeBox;
+    using ValueOnCIter = typename GridT::TreeType::ValueOnCIter;
+    ValueOnCIter above = grid.tree().cbeginValueOn();
+    above.setMaxDepth(ValueOnCIter::LEAF_DEPTH - 2);
+    for (; above; ++above) {
+        openvdb::CoordBBox box;
+        above.getBoundingBox(box);
+        activeVoxels += box.volume();
+        activeBox.expand(box);
+    }
+    if (activeTiles) {
+        for (const auto& [origin, mask] : *activeTiles) {
+            for (auto on = mask.beginOn(); on; ++on) {
+                using Int1T = typename GridT::TreeType::RootNodeType::ChildNodeType::ChildNodeType;
+                openvdb::Coord local;
+                Int1T::offsetToLocalCoord(on.pos(), local);
+                const openvdb::Coord o = origin + (local << int(LeafT::TOTAL));
+                activeVoxels += LeafT::SIZE;
+                activeBox.expand(openvdb::CoordBBox::createCube(o, int(LeafT::DIM)));
+            }
+        }
     }
     auto meta = openvdb::ConstPtrCast<openvdb::GridBase>(grid.copyGrid());
     const auto leafBytes = LeafT(openvdb::Coord(), openvdb::zeroVal<typename GridT::ValueType>()).memUsage();
     meta->insertMeta(openvdb::GridBase::META_FILE_BBOX_MIN,
-                     openvdb::Vec3IMetadata(leaves.activeBox.min().asVec3i()));
+                     openvdb::Vec3IMetadata(activeBox.min().asVec3i()));
     meta->insertMeta(openvdb::GridBase::META_FILE_BBOX_MAX,
-                     openvdb::Vec3IMetadata(leaves.activeBox.max().asVec3i()));
+                     openvdb::Vec3IMetadata(activeBox.max().asVec3i()));
     meta->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES, openvdb::Int64Metadata(std::int64_t(
         grid.tree().memUsage() + n * leafBytes)));
     meta->insertMeta(openvdb::GridBase::META_FILE_VOXEL_COUNT,
-                     openvdb::Int64Metadata(std::int64_t(leaves.activeVoxels)));
+                     openvdb::Int64Metadata(std::int64_t(activeVoxels)));
     meta->insertMeta("file_compression",
                      openvdb::StringMetadata(openvdb::io::compressionToString(gridFlags)));
     openvdb::io::DelayedLoadMetadata table;
@@ -965,7 +998,7 @@ FileHead vdbFileHead(const std::vector<HeadGrid>& input, const openvdb::MetaMap&
         const bool typed = grids[g]->apply<openvdb::TypeList<openvdb::FloatGrid, openvdb::Vec3SGrid>>(
             [&](const auto& grid) {
                 writeGridHead(os, part.bytes, at, names[g], grid, *in.leaves, in.bufferBytes, flags,
-                              part.maskRuns);
+                              part.maskRuns, in.activeTiles);
             });
         if (!typed) {
             OPENVDB_THROW(openvdb::ValueError, "grid '" + grids[g]->getName() + "' is a " +

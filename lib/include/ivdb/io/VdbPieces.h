@@ -6,6 +6,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 #include <utility>
@@ -92,6 +93,14 @@ struct FileHead
     void putMasks(std::size_t grid, std::uint64_t first, const std::vector<LeafRun::Mask>& masks);
 };
 
+/// @brief Per 128^3 node (by origin), the leaf-sized tiles that are active in the grid itself.
+/// A skeleton's active tiles in 128^3 nodes stand for its leaves; a grid that has active tiles
+/// of its own there (a fog volume's inside) keeps them inactive in its skeleton, with their
+/// values, and lists them here.
+using ActiveTiles =
+    std::map<openvdb::Coord,
+             openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType::NodeMaskType>;
+
 /// @brief One grid of the file vdbFileHead() lays out.
 struct HeadGrid
 {
@@ -103,6 +112,9 @@ struct HeadGrid
     /// their masks and pieces are not used).
     const LeafRun* leaves = nullptr;
     std::uint64_t bufferBytes = 0; ///< the runs' bytes, in total (their byteCount())
+    /// The grid's own active tiles in its 128^3 nodes, if any (its active tiles above those
+    /// nodes are active in the skeleton).
+    const ActiveTiles* activeTiles = nullptr;
 };
 
 /// @brief The parts of a .vdb file that holds @a grids (in order), up to and between their leaf

@@ -36,7 +36,10 @@ struct RasterizeResult
 /// (RasterRuns::skeleton) and the file's head (io::vdbFileHead); then every rank writes its
 /// leaves' masks into the head's topology and its buffers at its offset (a prefix sum) into a
 /// temporary file in the output's folder with MPI-IO, and rank 0 renames it over the output
-/// once every rank has written.
+/// once every rank has written. With a fog volume (options.fog), each rank then turns its
+/// leaves into the fog's (levelset::fogLeaf, with the ramp's end from every rank's lowest value
+/// and rank 0's tiles) and encodes them too; rank 0 makes the fog's nodes and tiles from the
+/// level set's (levelset::fogSkeleton) and the file holds both grids.
 /// Collective: call it on every rank of @a comm with the same options.
 /// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own, so a
 /// ParamError keeps its parameter): the errors of jobs::rasterize() (a keyed scene's frames are
