@@ -351,6 +351,7 @@ void printCsg(const CsgArgs& a, const mpi::CsgResult& r)
 void addCsgFlags(Command& cmd, CsgArgs& a)
 {
     addCombineInputs(cmd, a.job, a.op, a.compression);
+    addFogFlag(cmd, a.job.fog);
     addQuietFlag(cmd, a.quiet);
     cmd.flag("--per-rank", a.perRank, "Also print each rank's nodes, leaves read, leaves, voxels "
              "and peak memory");

@@ -185,10 +185,6 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
             throw ParamError(param::kInputs, "must be at least two files, got " +
                                                  std::to_string(opt.inputs.size()));
         }
-        if (opt.fog) {
-            OPENVDB_THROW(openvdb::ValueError, "a fog volume is made in one process (plain ivdb's "
-                          "csg and blend); ivdb-mpi writes the level set");
-        }
         if (rank == 0 && !opt.output.empty()) io::checkOutputPath(opt.output);
         for (const std::string& path : opt.inputs) {
             parts.push_back(std::make_unique<io::PartialGrid>(path, opt.grid));
@@ -305,8 +301,9 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     std::vector<NodeTable> tables;
     std::vector<NodeValues> values;
     io::LeafRun encoded;
+    openvdb::FloatGrid::Ptr own; // kept for a fog volume
     collective(comm, [&] {
-        openvdb::FloatGrid::Ptr own = openvdb::FloatGrid::create(combined->background());
+        own = openvdb::FloatGrid::create(combined->background());
         own->setGridClass(openvdb::GRID_LEVEL_SET);
         own->setSaveFloatAsHalf(combined->saveFloatAsHalf());
         TreeT& tree = combined->tree();
@@ -346,6 +343,7 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
         }
         tree.clearAllAccessors();
         encoded = io::encodeLeafRun(*own, opt.write);
+        if (!opt.fog) own.reset();
     });
     if (rank != 0) combined.reset();
     const std::vector<RunSummary> summaries = gatherSummaries(comm, encoded);
@@ -354,11 +352,10 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
     encoded.sizes.clear();
 
     // Rank 0: every rank's nodes into its own result's nodes and tiles (right everywhere but on
-    // the other ranks' nodes), pruned as OpenVDB prunes a level set, and the file's head.
+    // the other ranks' nodes), pruned as OpenVDB prunes a level set; the file's head from it.
     gatherOnRoot(comm, reports, 5);
     const std::vector<std::uint64_t> tableCounts = gatherOnRoot(comm, tables, 6);
     const std::vector<std::uint64_t> valueCounts = gatherOnRoot(comm, values, 7);
-    io::FileHead head;
     if (rank == 0) {
         // Each rank's tables point into its own values: now into everyone's.
         std::uint64_t table = 0, base = 0;
@@ -375,9 +372,10 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
         bufferBytes += s.bytes;
         leaves += s.leaves;
     }
+    openvdb::FloatGrid::Ptr skeleton;
     collective(comm, [&] {
         if (rank != 0) return;
-        const openvdb::FloatGrid::Ptr skeleton = io::skeletonOf(*combined);
+        skeleton = io::skeletonOf(*combined);
         combined.reset();
         TreeT& tree = skeleton->tree();
         std::size_t table = 0;
@@ -401,11 +399,12 @@ CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& opt)
         }
         openvdb::tools::pruneLevelSet(tree);
         io::stampGrid(*skeleton, jobs::combineSource(opt));
-        head = io::vdbFileHead(*skeleton, all, bufferBytes, io::fileStamp(), opt.write);
     });
-    all = io::LeafRun();
-
-    result.fileBytes = writeFile(comm, opt.output, head, {&encoded}, {summaries});
+    FogRun fog;
+    if (opt.fog) fog = makeFog(comm, opt.write, own->tree(), skeleton, summaries);
+    own.reset();
+    result.fileBytes = writeLevelSetFile(comm, opt.output, opt.write, skeleton, all, bufferBytes,
+                                         encoded, summaries, opt.fog ? &fog : nullptr);
     result.leaves = leaves;
     result.activeVoxels = activeVoxels;
     if (activeVoxels == 0) {

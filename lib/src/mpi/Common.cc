@@ -1,12 +1,17 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "Common.h"
 
+#include <ivdb/levelset/Fog.h>
 #include <ivdb/levelset/LevelSet.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 
 #include <unistd.h>
 
@@ -265,6 +270,82 @@ std::uint64_t writeFile(MPI_Comm comm, const std::string& output, io::FileHead& 
     if (output.empty()) return 0;
     writeTogether(comm, output, writes);
     return head.fileBytes;
+}
+
+FogRun makeFog(MPI_Comm comm, const io::WriteOptions& write, openvdb::FloatTree& leaves,
+               const openvdb::FloatGrid::Ptr& skeleton, const std::vector<RunSummary>& summaries)
+{
+    const int rank = rankOf(comm), size = sizeOf(comm);
+    float lowest = levelset::lowestValue(leaves);
+    MPI_Allreduce(MPI_IN_PLACE, &lowest, 1, MPI_FLOAT, MPI_MIN, comm);
+    float cutoff = 0.0f;
+    if (rank == 0) cutoff = levelset::fogCutoff(*skeleton, lowest);
+    MPI_Bcast(&cutoff, 1, MPI_FLOAT, 0, comm);
+    FogRun fog;
+    std::vector<std::uint8_t> kept;
+    collective(comm, [&] {
+        using LeafT = openvdb::FloatTree::LeafNodeType;
+        std::vector<LeafT*> stolen;
+        leaves.stealNodes(stolen); // in file order
+        std::vector<std::unique_ptr<LeafT>> run(stolen.begin(), stolen.end());
+        kept.assign(run.size(), 0);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, run.size()),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+            for (std::size_t k = r.begin(); k < r.end(); ++k) {
+                kept[k] = levelset::fogLeaf(*run[k], cutoff) ? 1 : 0;
+            }
+        });
+        auto part = openvdb::FloatGrid::create(0.0f);
+        part->setGridClass(openvdb::GRID_FOG_VOLUME);
+        for (std::size_t k = 0; k < run.size(); ++k) {
+            if (kept[k]) part->tree().addLeaf(run[k].release());
+        }
+        run.clear();
+        fog.encoded = io::encodeLeafRun(*part, write);
+    });
+    fog.summaries = gatherSummaries(comm, fog.encoded);
+    fog.all = gatherEntries(comm, fog.encoded, fog.summaries);
+    fog.encoded.codes.clear();
+    fog.encoded.sizes.clear();
+    // Rank 0: which of every leaf the fog keeps, in file order, and the fog's skeleton.
+    if (rank == 0) {
+        std::vector<std::uint8_t> all(kept);
+        for (int r = 1; r < size; ++r) {
+            const std::size_t at = all.size();
+            all.resize(at + summaries[std::size_t(r)].leaves);
+            recvBlob(comm, r, 2, all.data() + at, summaries[std::size_t(r)].leaves);
+        }
+        kept = std::move(all);
+    } else {
+        sendBlob(comm, 0, 2, kept.data(), kept.size());
+    }
+    collective(comm, [&] {
+        if (rank != 0) return;
+        fog.skeleton = levelset::fogSkeleton(*skeleton, kept, fog.tiles);
+    });
+    for (const RunSummary& s : fog.summaries) fog.bufferBytes += s.bytes;
+    return fog;
+}
+
+std::uint64_t writeLevelSetFile(MPI_Comm comm, const std::string& output,
+                                const io::WriteOptions& write, openvdb::FloatGrid::Ptr& skeleton,
+                                io::LeafRun& all, std::uint64_t bufferBytes,
+                                const io::LeafRun& encoded,
+                                const std::vector<RunSummary>& summaries, FogRun* fog)
+{
+    io::FileHead head;
+    collective(comm, [&] {
+        if (rankOf(comm) != 0) return;
+        std::vector<io::HeadGrid> grids{{skeleton, &all, bufferBytes}};
+        if (fog) grids.push_back({fog->skeleton, &fog->all, fog->bufferBytes, &fog->tiles});
+        head = io::vdbFileHead(grids, io::fileStamp(), write);
+    });
+    skeleton.reset();
+    all = io::LeafRun();
+    if (!fog) return writeFile(comm, output, head, {&encoded}, {summaries});
+    fog->skeleton.reset();
+    fog->all = io::LeafRun();
+    return writeFile(comm, output, head, {&encoded, &fog->encoded}, {summaries, fog->summaries});
 }
 
 std::vector<std::uint64_t> gatherPeakMemory(MPI_Comm comm)

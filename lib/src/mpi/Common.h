@@ -120,6 +120,36 @@ std::uint64_t writeFile(MPI_Comm comm, const std::string& output, io::FileHead& 
                         const std::vector<const io::LeafRun*>& runs,
                         const std::vector<std::vector<RunSummary>>& summaries);
 
+/// A fog volume's run on a rank and, on rank 0, what its head needs.
+struct FogRun
+{
+    io::LeafRun encoded, all; ///< the rank's leaves encoded; on rank 0, every rank's entries
+    std::vector<RunSummary> summaries;
+    openvdb::FloatGrid::Ptr skeleton; ///< rank 0's
+    io::ActiveTiles tiles;            ///< rank 0's: the skeleton's
+    std::uint64_t bufferBytes = 0;
+};
+
+/// levelset::fogFromLevelSet() over the ranks: each turns its run of the level set's leaves
+/// @a leaves (in file order; taken out of the tree) into the fog's in place, with the ramp's end
+/// from every rank's lowest value and rank 0's @a skeleton of the level set (io::skeletonOf's
+/// kind, with its metadata), and encodes them with @a write; rank 0 gathers which leaves the fog
+/// keeps (a byte a leaf; @a summaries: the level set's runs) and makes its skeleton.
+/// Collective.
+FogRun makeFog(MPI_Comm comm, const io::WriteOptions& write, openvdb::FloatTree& leaves,
+               const openvdb::FloatGrid::Ptr& skeleton, const std::vector<RunSummary>& summaries);
+
+/// Write a level set's file (and its fog volume's, if @a fog holds one): rank 0 lays out the
+/// head from its @a skeleton and every rank's entries @a all (the grid's buffers are
+/// @a bufferBytes) and fog's, then every rank writes its runs (@a encoded, @a summaries and the
+/// fog's). Frees the skeletons and entries. Returns the file's size (0 if @a output is empty).
+/// Collective.
+std::uint64_t writeLevelSetFile(MPI_Comm comm, const std::string& output,
+                                const io::WriteOptions& write, openvdb::FloatGrid::Ptr& skeleton,
+                                io::LeafRun& all, std::uint64_t bufferBytes,
+                                const io::LeafRun& encoded,
+                                const std::vector<RunSummary>& summaries, FogRun* fog);
+
 /// Every rank's peak resident memory (bytes), in rank order. Collective.
 std::vector<std::uint64_t> gatherPeakMemory(MPI_Comm comm);
 

@@ -8,16 +8,12 @@
 
 #include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbPieces.h>
-#include <ivdb/levelset/Fog.h>
 #include <ivdb/raster/Partition.h>
 #include <ivdb/scene/Scene.h>
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
 #include <openvdb/openvdb.h>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -43,75 +39,6 @@ struct RunHeader
     std::int32_t anyInside = 0;
     double computeSeconds = 0.0;
 };
-
-/// A fog volume's run on a rank and, on rank 0, what its head needs.
-struct FogRun
-{
-    io::LeafRun encoded, all;
-    std::vector<RunSummary> summaries;
-    openvdb::FloatGrid::Ptr skeleton;
-    io::ActiveTiles tiles;
-    std::uint64_t bufferBytes = 0;
-};
-
-/// levelset::fogFromLevelSet() over the ranks: each turns its run of the level set's @a leaves
-/// into the fog's (in place), with the ramp's end from every rank's lowest value and rank 0's
-/// @a skeleton of the level set; rank 0 gathers which leaves the fog keeps and makes its
-/// skeleton. Collective.
-FogRun makeFog(MPI_Comm comm, const jobs::RasterizeOptions& opt, openvdb::FloatTree& leaves,
-               const openvdb::FloatGrid::Ptr& skeleton, const std::vector<RunSummary>& summaries)
-{
-    const int rank = rankOf(comm), size = sizeOf(comm);
-    float lowest = levelset::lowestValue(leaves);
-    MPI_Allreduce(MPI_IN_PLACE, &lowest, 1, MPI_FLOAT, MPI_MIN, comm);
-    float cutoff = 0.0f;
-    if (rank == 0) cutoff = levelset::fogCutoff(*skeleton, lowest);
-    MPI_Bcast(&cutoff, 1, MPI_FLOAT, 0, comm);
-    FogRun fog;
-    std::vector<std::uint8_t> kept;
-    collective(comm, [&] {
-        using LeafT = openvdb::FloatTree::LeafNodeType;
-        std::vector<LeafT*> stolen;
-        leaves.stealNodes(stolen); // in file order
-        std::vector<std::unique_ptr<LeafT>> run(stolen.begin(), stolen.end());
-        kept.assign(run.size(), 0);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, run.size()),
-                          [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t k = r.begin(); k < r.end(); ++k) {
-                kept[k] = levelset::fogLeaf(*run[k], cutoff) ? 1 : 0;
-            }
-        });
-        auto part = openvdb::FloatGrid::create(0.0f);
-        part->setGridClass(openvdb::GRID_FOG_VOLUME);
-        for (std::size_t k = 0; k < run.size(); ++k) {
-            if (kept[k]) part->tree().addLeaf(run[k].release());
-        }
-        run.clear();
-        fog.encoded = io::encodeLeafRun(*part, opt.write);
-    });
-    fog.summaries = gatherSummaries(comm, fog.encoded);
-    fog.all = gatherEntries(comm, fog.encoded, fog.summaries);
-    fog.encoded.codes.clear();
-    fog.encoded.sizes.clear();
-    // Rank 0: which of every leaf the fog keeps, in file order, and the fog's skeleton.
-    if (rank == 0) {
-        std::vector<std::uint8_t> all(kept);
-        for (int r = 1; r < size; ++r) {
-            const std::size_t at = all.size();
-            all.resize(at + summaries[std::size_t(r)].leaves);
-            recvBlob(comm, r, 2, all.data() + at, summaries[std::size_t(r)].leaves);
-        }
-        kept = std::move(all);
-    } else {
-        sendBlob(comm, 0, 2, kept.data(), kept.size());
-    }
-    collective(comm, [&] {
-        if (rank != 0) return;
-        fog.skeleton = levelset::fogSkeleton(*skeleton, kept, fog.tiles);
-    });
-    for (const RunSummary& s : fog.summaries) fog.bufferBytes += s.bytes;
-    return fog;
-}
 
 } // namespace
 
@@ -269,27 +196,12 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
         jobs::stampRaster(*skeleton, opt, sc, settings);
     });
     FogRun fog;
-    if (opt.fog) fog = makeFog(comm, opt, *built.leaves, skeleton, summaries);
+    if (opt.fog) fog = makeFog(comm, opt.write, *built.leaves, skeleton, summaries);
     built.leaves.reset();
 
-    // Rank 0: the file's head.
-    io::FileHead head;
-    collective(comm, [&] {
-        if (rank != 0) return;
-        std::vector<io::HeadGrid> grids{{skeleton, &all, bufferBytes}};
-        if (opt.fog) grids.push_back({fog.skeleton, &fog.all, fog.bufferBytes, &fog.tiles});
-        head = io::vdbFileHead(grids, io::fileStamp(), opt.write);
-    });
-    skeleton.reset();
-    all = io::LeafRun();
     result.activeVoxels = activeVoxels;
-
-    if (opt.fog) {
-        result.fileBytes = writeFile(comm, opt.output, head, {&encoded, &fog.encoded},
-                                     {summaries, fog.summaries});
-    } else {
-        result.fileBytes = writeFile(comm, opt.output, head, {&encoded}, {summaries});
-    }
+    result.fileBytes = writeLevelSetFile(comm, opt.output, opt.write, skeleton, all, bufferBytes,
+                                         encoded, summaries, opt.fog ? &fog : nullptr);
     result.writeSeconds = secondsSince(writeStart);
 
     result.rankPeakMemory = gatherPeakMemory(comm);

@@ -46,12 +46,13 @@ struct CsgResult
 /// finds the crease from the topologies, and its 128^3 nodes join the split; rank 0 reads the
 /// inputs' leaves near the crease as well as its own, computes the blend's values there as
 /// ops::blend() does and sends each rank those in its nodes, which it sets into its sharp
-/// result (ops::spliceBlend) before reporting its nodes.
+/// result (ops::spliceBlend) before reporting its nodes. A fog volume (options.fog) is made from
+/// the result's leaves on each rank and its nodes on rank 0, as rasterize() makes it.
 /// Collective: call it on every rank with the same options.
 /// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own): the
 /// errors of jobs::combine(); ParamError for inputs on different transforms (plain ivdb
-/// resamples them); openvdb::ValueError for a fog
-/// volume (plain ivdb's) and for a level set with active tiles. Nothing is written on any error.
+/// resamples them); openvdb::ValueError for a level set with active tiles. Nothing is written
+/// on any error.
 CsgResult csg(MPI_Comm comm, const jobs::CombineOptions& options);
 
 } // namespace ivdb::mpi
