@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <set>
 #include <sstream>
 #include <string>
@@ -35,6 +37,8 @@ struct Case
     const char* name;
     implicit::Implicit::Ptr shape;
     double dx;
+    double halfWidth = 3.0;
+    bool clipped = false; // to the box [-1, 1]^3 (RasterSettings::bounds)
 };
 
 std::vector<Case> cases()
@@ -183,10 +187,16 @@ TEST(TestPartition, RunsAndSkeletonMakeTheRasterizedGrid)
     all.push_back({"large sphere", std::make_shared<implicit::Sphere>(Vec3d(0.0), 2.0), 0.01});
     all.push_back({"difference", std::make_shared<implicit::Csg>(implicit::Csg::Op::Difference,
                    std::vector<implicit::Implicit::Ptr>{a, b}), 0.01});
+    // A band of 10 voxels around a clipped cylinder: about 100,000 voxels near the clipping
+    // box's edges that no local method answers, fast-swept together across the runs.
+    all.push_back({"clipped cylinder, a wide band",
+                   implicit::makeCylinder(Vec3d(0.0), Vec3d(0.0, 0.0, 1.0), 0.5), 0.03, 10.0, true});
     for (const Case& c : all) {
         for (auto mode : {raster::Distance::Exact, raster::Distance::Bound}) {
             raster::RasterSettings s;
             s.voxelSize = c.dx;
+            s.halfWidth = c.halfWidth;
+            if (c.clipped) s.bounds = implicit::BBoxd(Vec3d(-1.0), Vec3d(1.0));
             s.distance = mode;
             const bool bound = mode == raster::Distance::Bound;
             raster::RasterStats whole;
@@ -209,20 +219,34 @@ TEST(TestPartition, RunsAndSkeletonMakeTheRasterizedGrid)
                 std::vector<openvdb::FloatTree::Ptr> parts;
                 raster::RasterStats sum;
                 bool anyInside = false;
+                std::vector<raster::RunResult> built;
+                std::vector<openvdb::Coord> unknown;
                 for (std::uint64_t r = 0; r < k; ++r) {
                     const std::uint64_t first = n * r / k, last = n * (r + 1) / k;
-                    raster::RunResult run = runs.build(first, last - first);
+                    built.push_back(runs.build(first, last - first));
+                    const raster::RunResult& run = built.back();
                     ASSERT_EQ(run.fates.size(), last - first) << what;
+                    ASSERT_TRUE(std::is_sorted(run.unknown.begin(), run.unknown.end())) << what;
+                    ASSERT_EQ(run.unknown.size(), run.stats.sweptDistances) << what;
+                    unknown.insert(unknown.end(), run.unknown.begin(), run.unknown.end());
+                }
+                // Every run's voxels no local method answered, swept together.
+                std::sort(unknown.begin(), unknown.end());
+                for (raster::RunResult& run : built) {
+                    runs.sweep(run, unknown);
                     fates.insert(fates.end(), run.fates.begin(), run.fates.end());
                     parts.push_back(run.leaves);
                     sum.localDistances += run.stats.localDistances;
                     sum.searchedDistances += run.stats.searchedDistances;
                     sum.approximateDistances += run.stats.approximateDistances;
+                    sum.sweptDistances += run.stats.sweptDistances;
                     anyInside = anyInside || run.anyInside;
                 }
                 EXPECT_EQ(sum.localDistances, whole.localDistances) << what;
                 EXPECT_EQ(sum.searchedDistances, whole.searchedDistances) << what;
                 EXPECT_EQ(sum.approximateDistances, whole.approximateDistances) << what;
+                EXPECT_EQ(sum.sweptDistances, whole.sweptDistances) << what;
+                if (c.clipped) EXPECT_GT(whole.sweptDistances, 10000u) << what;
                 const openvdb::FloatGrid::Ptr skeleton = runs.skeleton(fates, anyInside);
                 EXPECT_EQ(skeleton->tree().activeTileCount(), expected->tree().leafCount()) << what;
                 EXPECT_EQ(skeleton->getName(), expected->getName());

@@ -114,7 +114,11 @@ void printRasterizeJson(const RasterizeArgs& a, const mpi::RasterizeResult& r)
     nlohmann::json out{{"scene", a.job.scene}, {"output", a.job.output}, {"ranks", r.ranks},
                        {"leaves", r.leaves}, {"active_voxels", r.activeVoxels},
                        {"file_bytes", r.fileBytes}, {"compute_seconds", r.computeSeconds},
-                       {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds}};
+                       {"write_seconds", r.writeSeconds}, {"total_seconds", r.totalSeconds},
+                       {"local_distances", r.stats.localDistances},
+                       {"searched_distances", r.stats.searchedDistances},
+                       {"approximate_distances", r.stats.approximateDistances},
+                       {"swept_distances", r.stats.sweptDistances}};
     printJson(out, r.ranks, {{"leaves", &r.rankLeaves}, {"active_voxels", &r.rankActiveVoxels},
                              {"peak_memory_bytes", &r.rankPeakMemory}});
 }
@@ -154,12 +158,13 @@ int runRasterize(RasterizeArgs& a)
                 util::formatBytes(double(peak)).c_str(), r.computeSeconds, r.writeSeconds,
                 r.totalSeconds, a.job.output.c_str());
     const raster::RasterStats& st = r.stats;
-    if (st.searchedDistances + st.approximateDistances > 0) {
+    if (st.searchedDistances + st.approximateDistances + st.sweptDistances > 0) {
         std::printf("  true distances: %llu voxels by foot points, %llu by the lattice search "
-                    "(%llu of them approximate)\n",
+                    "(%llu of them approximate), %llu by fast sweeping\n",
                     (unsigned long long)st.localDistances,
                     (unsigned long long)(st.searchedDistances + st.approximateDistances),
-                    (unsigned long long)st.approximateDistances);
+                    (unsigned long long)st.approximateDistances,
+                    (unsigned long long)st.sweptDistances);
     }
     if (a.perRank) {
         for (int k = 0; k < r.ranks; ++k) {

@@ -19,7 +19,6 @@
 #include <chrono>
 #include <exception>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <thread>
 
@@ -39,6 +38,35 @@ struct RunHeader
     std::int32_t anyInside = 0;
     double computeSeconds = 0.0;
 };
+
+} // namespace
+
+namespace {
+
+/// Every rank's @a mine, joined in rank order, on every rank. Collective.
+std::vector<openvdb::Coord> gatherCoords(MPI_Comm comm, const std::vector<openvdb::Coord>& mine)
+{
+    const int size = sizeOf(comm);
+    const int count = int(3 * mine.size());
+    std::vector<int> counts(std::size_t(size), 0), at(std::size_t(size), 0);
+    MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, comm);
+    int total = 0;
+    for (int r = 0; r < size; ++r) {
+        at[std::size_t(r)] = total;
+        total += counts[std::size_t(r)];
+    }
+    std::vector<std::int32_t> send(static_cast<std::size_t>(count)), all(static_cast<std::size_t>(total));
+    for (std::size_t i = 0; i < mine.size(); ++i) {
+        for (int a = 0; a < 3; ++a) send[3 * i + std::size_t(a)] = mine[i][a];
+    }
+    MPI_Allgatherv(send.data(), count, MPI_INT32_T, all.data(), counts.data(), at.data(),
+                   MPI_INT32_T, comm);
+    std::vector<openvdb::Coord> out(all.size() / 3);
+    for (std::size_t i = 0; i < out.size(); ++i) {
+        out[i] = openvdb::Coord(all[3 * i], all[3 * i + 1], all[3 * i + 2]);
+    }
+    return out;
+}
 
 } // namespace
 
@@ -114,21 +142,16 @@ RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& opt)
     const std::uint64_t count = n * std::uint64_t(rank + 1) / std::uint64_t(size) - first;
     raster::RunResult built;
     collective(comm, [&] { jobs::withSceneErrors(opt, [&] { built = runs->build(first, count); }); });
+
+    // Voxels no local method answered: fast-swept as plain ivdb sweeps them, over all of them
+    // (every rank gets every run's; they are few) and set by the rank that holds them.
+    std::vector<openvdb::Coord> unknown = gatherCoords(comm, built.unknown);
+    std::sort(unknown.begin(), unknown.end());
+    result.stats.sweptDistances = unknown.size();
+    if (!unknown.empty()) collective(comm, [&] { runs->sweep(built, unknown); });
+    built.unknown = std::vector<openvdb::Coord>();
     const double computeSeconds = secondsSince(start);
     const auto writeStart = Clock::now();
-
-    // Voxels no local method answered need fast sweeping across the runs' borders.
-    std::uint64_t swept = built.stats.sweptDistances, sweptAll = 0;
-    MPI_Allreduce(&swept, &sweptAll, 1, MPI_UINT64_T, MPI_SUM, comm);
-    if (sweptAll > 0) {
-        std::ostringstream os;
-        os << opt.scene << ": " << sweptAll << " voxels of the band are farther from the surface "
-           << "than the local distance search reaches (with a half width of "
-           << settings.halfWidth << " voxels, near edges and corners of a shape that is not an "
-              "exact distance); plain ivdb fast-sweeps them, ivdb-mpi does not yet: use a "
-              "narrower band (the default 3 voxels) or plain ivdb";
-        OPENVDB_THROW(openvdb::RuntimeError, os.str());
-    }
 
     // Each rank encodes its leaves as the file stores them (a fog volume is made from them next).
     io::LeafRun encoded;

@@ -733,8 +733,10 @@ openvdb::FloatGrid::Ptr sampleDense(const Context& ctx, Counts& counts)
 /// The last resort, for voxels no local method answered (a band wider than the lattice window,
 /// and the surface beyond the window: deep inside near a medial axis, typically): the old way,
 /// fast sweeping from first-order estimates f / |grad f| (levelset::redistance), but only over
-/// those voxels grown by the band, so it costs what they need.
-void sweepUnknown(const Context& ctx, openvdb::FloatGrid& grid, const std::vector<Coord>& unknown)
+/// those voxels grown by the band, so it costs what they need. Sets the voxels @a targets
+/// (those of @a unknown that @a tree holds) in @a tree.
+void sweepUnknown(const Context& ctx, FloatTree& tree, const std::vector<Coord>& unknown,
+                  const std::vector<Coord>& targets)
 {
     openvdb::MaskTree region;
     for (const Coord& c : unknown) region.setValueOn(c);
@@ -742,7 +744,7 @@ void sweepUnknown(const Context& ctx, openvdb::FloatGrid& grid, const std::vecto
                                        openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::IGNORE_TILES);
     auto samples = openvdb::FloatGrid::create(static_cast<float>(ctx.band));
-    samples->setTransform(grid.transform().copy());
+    samples->setTransform(openvdb::math::Transform::createLinearTransform(ctx.dx));
     samples->tree().topologyUnion(region);
     openvdb::tree::LeafManager<FloatTree> leaves(samples->tree());
     const double limit = 4.0 * ctx.reach;
@@ -761,10 +763,10 @@ void sweepUnknown(const Context& ctx, openvdb::FloatGrid& grid, const std::vecto
     });
     const openvdb::FloatGrid::Ptr swept =
         levelset::redistance(*samples, ctx.band / ctx.dx, ctx.interrupter);
-    openvdb::tree::ValueAccessor<FloatTree> out(grid.tree());
+    openvdb::tree::ValueAccessor<FloatTree> out(tree);
     openvdb::tree::ValueAccessor<const FloatTree> in(swept->tree()), est(samples->tree());
     const float bg = static_cast<float>(ctx.band);
-    for (const Coord& c : unknown) {
+    for (const Coord& c : targets) {
         float v;
         if (in.probeValue(c, v) && ctx.inBand(v)) {
             out.setValueOn(c, v);
@@ -945,7 +947,7 @@ openvdb::FloatGrid::Ptr rasterize(const Implicit::Ptr& shape, const RasterSettin
             // In a fixed order, so that both paths and every run sweep the same way.
             std::vector<Coord> unknown(counts.unknown.begin(), counts.unknown.end());
             std::sort(unknown.begin(), unknown.end());
-            sweepUnknown(ctx, *grid, unknown);
+            sweepUnknown(ctx, grid->tree(), unknown, unknown);
         }
         openvdb::tools::pruneLevelSet(grid->tree());
         scope.end();
@@ -1206,8 +1208,35 @@ RunResult RasterRuns::build(std::uint64_t first, std::uint64_t count) const
     out.stats.searchedDistances = counts.searched;
     out.stats.approximateDistances = counts.approximate;
     out.stats.sweptDistances = counts.unknown.size();
+    out.unknown.assign(counts.unknown.begin(), counts.unknown.end());
+    std::sort(out.unknown.begin(), out.unknown.end());
     out.anyInside = counts.anyInside;
     return out;
+}
+
+void RasterRuns::sweep(RunResult& run, const std::vector<Coord>& unknown) const
+{
+    const Context& ctx = mImpl->ctx;
+    if (unknown.empty()) return;
+    sweepUnknown(ctx, *run.leaves, unknown, run.unknown);
+    // rasterize() prunes the whole grid next: a leaf left without an active voxel becomes a tile,
+    // inside or outside by its first value. The run's leaves are its fates' Leaf entries, in
+    // order.
+    std::vector<std::size_t> slots;
+    for (std::size_t i = 0; i < run.fates.size(); ++i) {
+        if (run.fates[i] == LeafFate::Leaf) slots.push_back(i);
+    }
+    std::vector<Coord> emptied;
+    std::size_t k = 0;
+    for (auto it = run.leaves->cbeginLeaf(); it; ++it, ++k) {
+        if (!it->isEmpty()) continue;
+        if (k >= slots.size()) OPENVDB_THROW(openvdb::ValueError, "a run with more leaves than fates");
+        run.fates[slots[k]] = it->getFirstValue() < 0.0f ? LeafFate::Inside : LeafFate::Outside;
+        emptied.push_back(it->origin());
+    }
+    for (const Coord& o : emptied) {
+        delete run.leaves->root().stealNode<LeafT>(o, run.leaves->background(), false);
+    }
 }
 
 openvdb::FloatGrid::Ptr RasterRuns::skeleton(const std::vector<LeafFate>& fates, bool anyInside) const

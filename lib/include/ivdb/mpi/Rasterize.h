@@ -31,7 +31,8 @@ struct RasterizeResult
 /// @details Every rank reads the scene and runs the interval descent (no voxel evaluated) to
 /// find the leaves the band may cross, in file order (raster::RasterRuns); rank r builds the
 /// r-th of as many equal runs of them (raster::partition's split) on its threads and encodes
-/// its leaves' buffers (io::encodeLeafRun). Rank 0 gathers what each leaf became and the
+/// its leaves' buffers (io::encodeLeafRun); the voxels no local distance method answers are
+/// gathered on every rank and fast-swept together (RasterRuns::sweep). Rank 0 gathers what each leaf became and the
 /// leaves' table entries (10 bytes a leaf), builds the grid's nodes and tiles
 /// (RasterRuns::skeleton) and the file's head (io::vdbFileHead); then every rank writes its
 /// leaves' masks into the head's topology and its buffers at its offset (a prefix sum) into a
@@ -43,10 +44,8 @@ struct RasterizeResult
 /// Collective: call it on every rank of @a comm with the same options.
 /// @throw on every rank, the error of the lowest rank that failed (rank 0 keeps its own, so a
 /// ParamError keeps its parameter): the errors of jobs::rasterize() (a keyed scene's frames are
-/// rasterizeSequence()'s); openvdb::RuntimeError for dense sampling, or voxels no local distance method answers (in bands wider
-/// than the default, near edges and corners of shapes that are not exact distances), which need
-/// fast sweeping across ranks;
-/// openvdb::IoError when the file cannot be written. Nothing is written on any error: the
+/// rasterizeSequence()'s); ParamError for dense sampling; openvdb::IoError when the file cannot
+/// be written. Nothing is written on any error: the
 /// temporary file is removed and an existing output is left as it was.
 RasterizeResult rasterize(MPI_Comm comm, const jobs::RasterizeOptions& options);
 

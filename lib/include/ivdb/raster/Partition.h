@@ -70,8 +70,11 @@ struct RunResult
     /// What each leaf of the run became, in file order.
     std::vector<LeafFate> fates;
     /// How the run's distances were found; sweptDistances counts the voxels no local method
-    /// answered (rasterize() sweeps those, across runs: the caller must refuse them).
+    /// answered (those in `unknown`, which RasterRuns::sweep() decides).
     RasterStats stats;
+    /// The run's voxels no local method answered, sorted: active with value 0 in their leaves
+    /// until RasterRuns::sweep() sets them.
+    std::vector<openvdb::Coord> unknown;
     /// A strictly negative value was seen (rasterize() clears the grid of a shape that is not
     /// an exact distance when no run saw one: a zero set without an inside).
     bool anyInside = false;
@@ -83,8 +86,8 @@ struct RunResult
 /// rasterize()'s grid, voxel for voxel and node for node.
 /// @details Every process constructs it from the same shape and settings (the interval descent:
 /// no voxel is evaluated). The voxels no local method answers (in bands wider than the default,
-/// near edges and corners of shapes that are not exact distances) need fast sweeping across
-/// runs, which this does not do: build() counts them.
+/// near edges and corners of shapes that are not exact distances) are fast-swept together, as
+/// rasterize() sweeps them: every process sweeps all runs' (sweep()), which are few.
 class RasterRuns
 {
 public:
@@ -102,6 +105,13 @@ public:
     /// them. @throw openvdb::ValueError for a run beyond leaves(); openvdb::RuntimeError if the
     /// settings' interrupter cancels
     RunResult build(std::uint64_t first, std::uint64_t count) const;
+
+    /// Decide @a run's voxels no local method answered (RunResult::unknown) as rasterize()
+    /// does: fast sweeping over @a unknown, every run's (sorted; the sweep's region is theirs
+    /// grown by the band), setting @a run's own. A leaf left without a band voxel becomes the
+    /// tile rasterize()'s pruning makes (its fate Inside or Outside, by its first value).
+    /// @throw openvdb::RuntimeError if the settings' interrupter cancels
+    void sweep(RunResult& run, const std::vector<openvdb::Coord>& unknown) const;
 
     /// The grid rasterize() makes, but for its leaves: the same transform, class, name, nodes
     /// and tiles (pruned as rasterize() prunes), with an active tile of value 0 in a 128^3 node
