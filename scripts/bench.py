@@ -79,11 +79,15 @@ def run(cmd):
 
 
 def median_runs(cmds, reps):
-    """Interleave the commands reps times; median wall time and peak memory of each."""
+    """Interleave the commands reps times; median wall time and peak memory of each. Each run
+    starts with the page cache's writes flushed (os.sync, not timed), so that no run pays for
+    writing back what the one before left unsynced (vdb_tool does not sync its output; ivdb
+    syncs its own)."""
     times = {k: [] for k in cmds}
     mems = {k: [] for k in cmds}
     for _ in range(reps):
         for k, cmd in cmds.items():
+            os.sync()
             w, m = run(cmd)
             times[k].append(w)
             mems[k].append(m)

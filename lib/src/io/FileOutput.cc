@@ -7,6 +7,7 @@
 #include <ios>
 #include <system_error>
 
+#include <fcntl.h>
 #include <unistd.h>
 
 namespace ivdb::io {
@@ -14,6 +15,7 @@ namespace ivdb::io {
 namespace {
 
 constexpr std::size_t kBufferBytes = 1 << 20;
+constexpr std::uint64_t kWritebackBytes = 8u << 20;
 
 } // namespace
 
@@ -45,6 +47,16 @@ void FileOutputBuffer::flushBuffer()
     mBufferStart += n;
     mEnd = std::max(mEnd, mBufferStart);
     setp(mBuffer.data(), mBuffer.data() + mBuffer.size());
+    startWriteback();
+}
+
+void FileOutputBuffer::startWriteback()
+{
+    if (mEnd < mWrittenBack + kWritebackBytes) return;
+    // Advisory: a failure here shows in the fsync that ends the write.
+    (void)::sync_file_range(mFd, ::off64_t(mWrittenBack), ::off64_t(mEnd - mWrittenBack),
+                            SYNC_FILE_RANGE_WRITE);
+    mWrittenBack = mEnd;
 }
 
 FileOutputBuffer::int_type FileOutputBuffer::overflow(int_type c)
@@ -65,6 +77,7 @@ std::streamsize FileOutputBuffer::xsputn(const char* s, std::streamsize n)
         writeAt(s, std::uint64_t(n), mBufferStart);
         mBufferStart += std::uint64_t(n);
         mEnd = std::max(mEnd, mBufferStart);
+        startWriteback();
         return n;
     }
     if (n > epptr() - pptr()) flushBuffer();

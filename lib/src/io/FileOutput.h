@@ -30,10 +30,15 @@ private:
     /// Write @a size bytes at @a offset, bypassing the buffer. @throw std::ios_base::failure
     void writeAt(const char* bytes, std::uint64_t size, std::uint64_t offset) const;
     void flushBuffer();
+    /// Start the kernel writing back what has been written so far, every few megabytes
+    /// (sync_file_range, which does not wait for it): the fsync that ends a write then finds
+    /// most of the file on disk, the disk having worked while the rest was compressed.
+    void startWriteback();
 
     int mFd;
     std::uint64_t mBufferStart = 0; ///< the file offset of the buffer's first byte
     std::uint64_t mEnd = 0;         ///< one past the furthest byte written
+    std::uint64_t mWrittenBack = 0; ///< bytes [0, this) are being written back
     std::vector<char> mBuffer;
 };
 
