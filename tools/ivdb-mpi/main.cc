@@ -327,9 +327,7 @@ void printCsg(const CsgArgs& a, const mpi::CsgResult& r)
     }
     if (a.quiet) return;
     const std::uint64_t peak = largest(r.rankPeakMemory);
-    const std::string what = a.job.p ? "blend " + a.op + " p=" + util::formatNumber(*a.job.p)
-                           : a.job.k ? "smooth " + a.op + " k=" + util::formatNumber(*a.job.k)
-                                     : "csg " + a.op;
+    const std::string what = combineLabel(a.op, a.job);
     std::printf("%s of %zu level sets: %llu active voxels on %d ranks, file %s, peak memory "
                 "per rank up to %s, read %.3f s, %s %.3f s, write %.3f s, total %.3f s -> "
                 "%s\n",

@@ -326,6 +326,13 @@ void addBlendOptions(Command& cmd, std::optional<double>& p, std::optional<doubl
         ->capture_default_str();
 }
 
+std::string combineLabel(const std::string& op, const jobs::CombineOptions& job)
+{
+    if (job.p) return "blend " + op + " p=" + util::formatNumber(*job.p);
+    if (job.k) return "smooth " + op + " k=" + util::formatNumber(*job.k);
+    return "csg " + op;
+}
+
 void addQuietFlag(Command& cmd, bool& quiet)
 {
     cmd.flag("-q,--quiet", quiet, "Do not print the summary line");

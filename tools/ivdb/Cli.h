@@ -182,6 +182,10 @@ void printFrame(const std::string& scene, const jobs::FrameReport& f, std::size_
 void addBlendOptions(Command& cmd, std::optional<double>& p, std::optional<double>& k,
                      double& tolerance);
 
+/// @brief What a csg or blend summary line calls the operation @a op of @a job: "csg union",
+/// "blend union p=20" or "smooth union k=0.1".
+std::string combineLabel(const std::string& op, const jobs::CombineOptions& job);
+
 /// @brief The input, output and options of `gradient` (ivdb and ivdb-mpi), bound to @a job and
 /// @a compression.
 void addGradientOptions(Command& cmd, jobs::GradientOptions& job, std::string& compression);

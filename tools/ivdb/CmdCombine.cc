@@ -4,7 +4,6 @@
 #include "Cli.h"
 
 #include <ivdb/jobs/Combine.h>
-#include <ivdb/util/System.h>
 
 #include <cstdio>
 
@@ -37,9 +36,7 @@ int runCombine(CombineArgs& a, bool blend)
     const jobs::CombineResult r = jobs::combine(a.job);
     printNotes(r.notes, r.warnings);
     if (!a.quiet) {
-        const std::string what = !blend ? "csg " + a.op
-                               : a.p ? "blend " + a.op + " p=" + util::formatNumber(*a.p)
-                                     : "smooth " + a.op + " k=" + util::formatNumber(*a.k);
+        const std::string what = combineLabel(a.op, a.job);
         std::printf("%s of %zu level sets: %llu active voxels, read %.3f s, %s %.3f s, total "
                     "%.3f s -> %s\n",
                     what.c_str(), a.job.inputs.size(), (unsigned long long)r.surface->activeVoxelCount(),

@@ -39,10 +39,6 @@ struct RunHeader
     double computeSeconds = 0.0;
 };
 
-} // namespace
-
-namespace {
-
 /// Every rank's @a mine, joined in rank order, on every rank. Collective.
 std::vector<openvdb::Coord> gatherCoords(MPI_Comm comm, const std::vector<openvdb::Coord>& mine)
 {
