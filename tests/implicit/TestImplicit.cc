@@ -573,6 +573,42 @@ TEST_F(TestImplicit, IntervalContainsValues)
     }
 }
 
+TEST_F(TestImplicit, BatchIntervalsAgreeWithIntervalAndContainValues)
+{
+    // intervals() over boxes of one size (Quadric's own loop, the default elsewhere) equals
+    // interval() per box up to rounding, and so contains the values in each box.
+    for (const Case& c : allCases()) {
+        for (double size : {0.01, 0.2, 3.0}) {
+            const Vec3d half(0.5 * size, 0.3 * size, 0.7 * size);
+            std::vector<double> x(kMaxBatch), y(kMaxBatch), z(kMaxBatch), lo(kMaxBatch),
+                hi(kMaxBatch);
+            for (std::size_t i = 0; i < kMaxBatch; ++i) {
+                x[i] = uniform(-4, 4);
+                y[i] = uniform(-4, 4);
+                z[i] = uniform(-4, 4);
+            }
+            c.f->intervals(x.data(), y.data(), z.data(), half, kMaxBatch, lo.data(), hi.data());
+            for (std::size_t i = 0; i < kMaxBatch; ++i) {
+                const Vec3d m(x[i], y[i], z[i]);
+                const BBoxd box(m - half, m + half);
+                const Interval iv = c.f->interval(box);
+                const double scale = 1e-12 * (1.0 + std::abs(iv.lo) + std::abs(iv.hi));
+                ASSERT_NEAR(lo[i], iv.lo, scale) << c.name << " size " << size << " i=" << i;
+                ASSERT_NEAR(hi[i], iv.hi, scale) << c.name << " size " << size << " i=" << i;
+                for (int k = 0; k < 8; ++k) {
+                    const Vec3d p = k < 4 ? randomIn(box)
+                                          : Vec3d(k & 1 ? box.max()[0] : box.min()[0],
+                                                  k & 2 ? box.max()[1] : box.min()[1],
+                                                  box.max()[2]);
+                    const double v = c.f->value(p), slack = 1e-12 * (1 + std::abs(v));
+                    ASSERT_TRUE(lo[i] - slack <= v && v <= hi[i] + slack)
+                        << c.name << ": " << v << " not in [" << lo[i] << ", " << hi[i] << "]";
+                }
+            }
+        }
+    }
+}
+
 TEST_F(TestImplicit, SphereIntervalIsTight)
 {
     const Sphere sphere(kSphereC, kSphereR);

@@ -25,6 +25,17 @@ void Implicit::values(const double* x, const double* y, const double* z, double*
     for (std::size_t i = 0; i < n; ++i) out[i] = value(Vec3d(x[i], y[i], z[i]));
 }
 
+void Implicit::intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                         std::size_t n, double* lo, double* hi) const
+{
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d c(cx[i], cy[i], cz[i]);
+        const Interval iv = interval(BBoxd(c - half, c + half));
+        lo[i] = iv.lo;
+        hi[i] = iv.hi;
+    }
+}
+
 Implicit::Ptr Implicit::prune(const BBoxd&) const
 {
     return shared_from_this();

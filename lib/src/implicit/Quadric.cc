@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Quadric.h>
 
+#include "../util/Simd.h"
 #include "Checks.h"
 
 #include <openvdb/Exceptions.h>
@@ -221,6 +222,7 @@ struct EigenQuadric
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
+IVDB_VECTOR_CLONES
 void Quadric::footPoints(const double* x, const double* y, const double* z, const double* values,
                          std::size_t n, const FootQuery& query, FootPoints& out) const
 {
@@ -360,6 +362,36 @@ Interval Quadric::interval(const BBoxd& box) const
         }
     }
     return {lo, hi};
+}
+
+IVDB_VECTOR_CLONES
+void Quadric::intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                        std::size_t n, double* lo, double* hi) const
+{
+    // interval() per box, with the terms that depend only on the boxes' common size summed once.
+    const Mat4 q = mQ;
+    const double h[3] = {half[0], half[1], half[2]};
+    double down = 0.0, up = 0.0;
+    for (int i = 0; i < 3; ++i) {
+        const double sq = q[i][i] * h[i] * h[i];
+        down += std::min(sq, 0.0);
+        up += std::max(sq, 0.0);
+        for (int j = i + 1; j < 3; ++j) {
+            const double cross = 2.0 * std::abs(q[i][j]) * h[i] * h[j];
+            down -= cross;
+            up += cross;
+        }
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        const double x = cx[i], y = cy[i], z = cz[i];
+        const double g0 = 2.0 * (q[0][0] * x + q[0][1] * y + q[0][2] * z + q[0][3]);
+        const double g1 = 2.0 * (q[1][0] * x + q[1][1] * y + q[1][2] * z + q[1][3]);
+        const double g2 = 2.0 * (q[2][0] * x + q[2][1] * y + q[2][2] * z + q[2][3]);
+        const double lin = std::abs(g0) * h[0] + std::abs(g1) * h[1] + std::abs(g2) * h[2];
+        const double v = quadricValue(q, x, y, z);
+        lo[i] = v - lin + down;
+        hi[i] = v + lin + up;
+    }
 }
 
 BBoxd Quadric::boundingBox() const { return mBox; }

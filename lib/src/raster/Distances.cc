@@ -18,7 +18,7 @@ void trueDistances(const implicit::Implicit& f, const openvdb::Coord* ijk, const
     implicit::FootPoints feet;
     implicit::FootQuery query;
     query.tolerance = s.tolerance;
-    query.far = s.far;
+    query.far = s.band; // no foot point is solved for beyond the band
     query.feet = false;
     f.footPoints(x, y, z, values, n, query, feet);
     for (std::size_t i = 0; i < n; ++i) {

@@ -14,7 +14,8 @@ namespace ivdb::raster::detail {
 struct DistanceSettings
 {
     double dx = 0.0;          ///< voxel size
-    double far = 0.0;         ///< beyond this, a distance only needs to be "farther"
+    double band = 0.0;        ///< the band's half width: beyond it a voxel keeps only its sign
+    double far = 0.0;         ///< the search's: beyond this a distance only needs to be "farther"
     double tolerance = 0.0;   ///< world units a certified distance may be off
     int searchRadius = 0;     ///< voxels: the half side of the lattice window of the search
 };

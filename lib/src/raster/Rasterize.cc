@@ -178,19 +178,23 @@ void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, c
                 }
         for (int k = 0; k < m; ++k) sv[k] = v[index[k]];
     } else {
+        // The 64 groups' boxes (voxel centres), grown by the band, in one call.
         const double grow = ctx.band + 1e-9 * ctx.dx;
-        for (int a = 0; a < 8; a += 2)
-        for (int b = 0; b < 8; b += 2)
-        for (int c = 0; c < 8; c += 2) {
-            const Coord lo = origin.offsetBy(a, b, c);
-            const BBoxd w = ctx.worldBox(CoordBBox(lo, lo.offsetBy(1, 1, 1)));
-            const Interval iv = f.interval(BBoxd(w.min() - Vec3d(grow), w.max() + Vec3d(grow)));
+        double cx[64], cy[64], cz[64], lo[64], hi[64];
+        for (int g = 0; g < 64; ++g) {
+            cx[g] = (double(origin.x() + 2 * (g >> 4)) + 0.5) * ctx.dx;
+            cy[g] = (double(origin.y() + 2 * ((g >> 2) & 3)) + 0.5) * ctx.dx;
+            cz[g] = (double(origin.z() + 2 * (g & 3)) + 0.5) * ctx.dx;
+        }
+        f.intervals(cx, cy, cz, Vec3d(0.5 * ctx.dx + grow), 64, lo, hi);
+        for (int g = 0; g < 64; ++g) {
+            const int a = 2 * (g >> 4), b = 2 * ((g >> 2) & 3), c = 2 * (g & 3);
             for (int i = a; i < a + 2; ++i)
             for (int j = b; j < b + 2; ++j)
             for (int k = c; k < c + 2; ++k) {
                 const int n = (i << 6) | (j << 3) | k;
-                if (iv.lo > 0.0) v[n] = ctx.band; // no surface within the band
-                else if (iv.hi < 0.0) v[n] = -ctx.band, inside = true;
+                if (lo[g] > 0.0) v[n] = ctx.band; // no surface within the band
+                else if (hi[g] < 0.0) v[n] = -ctx.band, inside = true;
                 else take(n, i, j, k);
             }
         }
@@ -846,6 +850,7 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         // The lattice search looks one voxel beyond the band; the pruned node must hold there.
         ctx.distances.dx = ctx.dx;
         ctx.distances.searchRadius = std::min(ctx.reachSteps + 1, kMaxSearchRadius);
+        ctx.distances.band = ctx.band;
         ctx.distances.far = ctx.band + ctx.dx;
         ctx.distances.tolerance = kDistanceTolerance * ctx.dx;
         // The band's straddle test and the pruned nodes must cover the search's window (an

@@ -33,6 +33,8 @@ public:
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
+    void intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                   std::size_t n, double* lo, double* hi) const override;
     /// Finite only when A is positive definite (an ellipsoid, or empty).
     BBoxd boundingBox() const override;
     /// True for a plane with a unit normal: then f is the exact signed distance.
