@@ -2,6 +2,7 @@
 // Unit tests for the implicit-function nodes: primitives, quadrics, CSG and transforms.
 // Every value is checked against a closed form written here, independently of the library.
 
+#include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Implicit.h>
 #include <ivdb/implicit/Primitives.h>
@@ -544,6 +545,51 @@ TEST_F(TestImplicit, BatchValuesMatchValueBitForBit)
             c.f->values(x.data(), y.data(), z.data(), out.data(), n);
             for (std::size_t i = 0; i < n; ++i) {
                 EXPECT_EQ(out[i], c.f->value(Vec3d(x[i], y[i], z[i]))) << c.name << " i=" << i;
+            }
+        }
+    }
+}
+
+TEST_F(TestImplicit, BatchGradientsAndTheFusedCallMatchBitForBit)
+{
+    // gradients() equals gradient() at each point, and valuesAndGradients() equals values() and
+    // gradients(), bit for bit: for every node, and for super-elliptic blends (their own fused
+    // loop, sharing the exponentials) of two and three children, a difference among them.
+    std::vector<Case> cases = allCases();
+    const auto sphere = std::make_shared<Sphere>(kSphereC, kSphereR);
+    const auto box = std::make_shared<Box>(kBoxC, kBoxSize);
+    const auto torus = std::make_shared<Torus>(kTorusC, kMajor, kMinor);
+    for (auto op : {Csg::Op::Union, Csg::Op::Intersection, Csg::Op::Difference}) {
+        cases.push_back({"blend2", std::make_shared<Blend>(op, 4.0, std::vector<Ptr>{sphere, box}),
+                         nullptr});
+        cases.push_back({"blend3", std::make_shared<Blend>(op, 30.0,
+                                                           std::vector<Ptr>{sphere, box, torus}),
+                         nullptr});
+    }
+    for (const Case& c : cases) {
+        for (std::size_t n : {std::size_t(1), std::size_t(37), kMaxBatch}) {
+            std::vector<double> x(n), y(n), z(n), gx(n), gy(n), gz(n), v(n), fv(n), fx(n),
+                fy(n), fz(n);
+            for (std::size_t i = 0; i < n; ++i) {
+                x[i] = uniform(-4, 4);
+                y[i] = uniform(-4, 4);
+                z[i] = uniform(-4, 4);
+            }
+            // A point at the sphere's centre, where its gradient is a convention.
+            x[0] = kSphereC[0], y[0] = kSphereC[1], z[0] = kSphereC[2];
+            c.f->gradients(x.data(), y.data(), z.data(), gx.data(), gy.data(), gz.data(), n);
+            c.f->values(x.data(), y.data(), z.data(), v.data(), n);
+            c.f->valuesAndGradients(x.data(), y.data(), z.data(), fv.data(), fx.data(), fy.data(),
+                                    fz.data(), n);
+            for (std::size_t i = 0; i < n; ++i) {
+                const Vec3d g = c.f->gradient(Vec3d(x[i], y[i], z[i]));
+                ASSERT_EQ(gx[i], g[0]) << c.name << " i=" << i;
+                ASSERT_EQ(gy[i], g[1]) << c.name << " i=" << i;
+                ASSERT_EQ(gz[i], g[2]) << c.name << " i=" << i;
+                ASSERT_EQ(fv[i], v[i]) << c.name << " i=" << i;
+                ASSERT_EQ(fx[i], gx[i]) << c.name << " i=" << i;
+                ASSERT_EQ(fy[i], gy[i]) << c.name << " i=" << i;
+                ASSERT_EQ(fz[i], gz[i]) << c.name << " i=" << i;
             }
         }
     }

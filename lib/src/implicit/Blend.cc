@@ -34,6 +34,13 @@ private:
     double* mData;
 };
 
+/// exp(s p (t - e)) for a term t and the extreme term e: exactly 1 for e itself (exp(0)),
+/// without the call.
+inline double superEllipticTerm(double s, double p, double t, double e)
+{
+    return t == e ? 1.0 : std::exp(s * p * (t - e));
+}
+
 /// The weights d f / d t_i = exp(s p (t_i - e)) / sum of a super-elliptic blend's terms.
 void superEllipticWeights(CsgOp op, double p, const double* t, std::size_t n, double* w)
 {
@@ -42,7 +49,7 @@ void superEllipticWeights(CsgOp op, double p, const double* t, std::size_t n, do
     for (std::size_t i = 0; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
     double sum = 0.0;
     for (std::size_t i = 0; i < n; ++i) {
-        w[i] = std::exp(s * p * (t[i] - e));
+        w[i] = superEllipticTerm(s, p, t[i], e);
         sum += w[i];
     }
     for (std::size_t i = 0; i < n; ++i) w[i] /= sum;
@@ -132,7 +139,7 @@ double blendTerms(Csg::Op op, double p, const double* t, std::size_t n)
     double e = t[0];
     for (std::size_t i = 1; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
     double sum = 0.0;
-    for (std::size_t i = 0; i < n; ++i) sum += std::exp(s * p * (t[i] - e));
+    for (std::size_t i = 0; i < n; ++i) sum += superEllipticTerm(s, p, t[i], e);
     return e + s * std::log(sum) / p;
 }
 
@@ -211,6 +218,51 @@ void Blend::gradients(const double* x, const double* y, const double* z, double*
             const double* cgc = cg.data() + 3 * c * n;
             const Vec3d gi(cgc[i], cgc[n + i], cgc[2 * n + i]);
             g += gi * ((mOp == Op::Difference && c > 0) ? -w[c] : w[c]);
+        }
+        gx[i] = g[0];
+        gy[i] = g[1];
+        gz[i] = g[2];
+    }
+}
+
+void Blend::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
+                               double* gx, double* gy, double* gz, std::size_t n) const
+{
+    if (mKernel.kind != BlendKernel::Kind::SuperElliptic) {
+        Implicit::valuesAndGradients(x, y, z, out, gx, gy, gz, n);
+        return;
+    }
+    // values() and gradients() in one pass: the same terms, exponentials, sums and products in
+    // the same order (blendTerms, superEllipticWeights), so the same bits.
+    const std::size_t m = mChildren.size();
+    std::vector<double> terms(m * n), cg(3 * m * n);
+    for (std::size_t c = 0; c < m; ++c) {
+        double* row = terms.data() + c * n;
+        mChildren[c]->values(x, y, z, row, n);
+        if (mOp == Op::Difference && c > 0) {
+            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
+        }
+        double* g = cg.data() + 3 * c * n;
+        mChildren[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
+    }
+    const double s = mOp == Op::Union ? -1.0 : 1.0, p = mKernel.p;
+    std::vector<double> w(m);
+    for (std::size_t i = 0; i < n; ++i) {
+        double e = terms[i];
+        for (std::size_t c = 1; c < m; ++c) {
+            e = s < 0.0 ? std::min(e, terms[c * n + i]) : std::max(e, terms[c * n + i]);
+        }
+        double sum = 0.0;
+        for (std::size_t c = 0; c < m; ++c) {
+            w[c] = superEllipticTerm(s, p, terms[c * n + i], e);
+            sum += w[c];
+        }
+        out[i] = e + s * std::log(sum) / p;
+        Vec3d g(0.0);
+        for (std::size_t c = 0; c < m; ++c) {
+            const double* cgc = cg.data() + 3 * c * n;
+            const double wc = w[c] / sum;
+            g += Vec3d(cgc[i], cgc[n + i], cgc[2 * n + i]) * ((mOp == Op::Difference && c > 0) ? -wc : wc);
         }
         gx[i] = g[0];
         gy[i] = g[1];

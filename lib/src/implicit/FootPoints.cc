@@ -6,6 +6,7 @@
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Modifiers.h>
 
+#include "../util/Simd.h"
 #include "Feet.h"
 
 #include <algorithm>
@@ -52,6 +53,47 @@ void exactFootPoints(const Implicit& f, const double* x, const double* y, const 
         out.x[i] = x[i] - s * gx[i];
         out.y[i] = y[i] - s * gy[i];
         out.z[i] = z[i] - s * gz[i];
+    }
+}
+
+/// One round of the smooth iteration, for every point at once (a loop that vectorizes): at the
+/// current point q (value f, gradient h) of query point p, whether h is usable, q's distance off
+/// the surface and p's off q's normal, |p - q|, and the next point (onto the surface along h,
+/// then along the tangent plane towards the foot of the perpendicular from p).
+struct RoundState
+{
+    double off[kMaxBatch], tangential[kMaxBatch], dist[kMaxBatch];
+    double nx[kMaxBatch], ny[kMaxBatch], nz[kMaxBatch];
+    bool valid[kMaxBatch];
+};
+
+IVDB_VECTOR_CLONES
+void smoothRound(const double* __restrict px, const double* __restrict py,
+                 const double* __restrict pz, const double* __restrict qx,
+                 const double* __restrict qy, const double* __restrict qz,
+                 const double* __restrict f, const double* __restrict hx,
+                 const double* __restrict hy, const double* __restrict hz, std::size_t m,
+                 RoundState& __restrict st)
+{
+    for (std::size_t k = 0; k < m; ++k) {
+        const double h2 = hx[k] * hx[k] + hy[k] * hy[k] + hz[k] * hz[k];
+        st.valid[k] = h2 > 0.0 && std::isfinite(h2);
+        const double hl = std::sqrt(h2);
+        const double rx = px[k] - qx[k], ry = py[k] - qy[k], rz = pz[k] - qz[k];
+        const double ux = hx[k] / hl, uy = hy[k] / hl, uz = hz[k] / hl;
+        const double along = rx * ux + ry * uy + rz * uz;
+        const double tx = rx - ux * along, ty = ry - uy * along, tz = rz - uz * along;
+        st.off[k] = std::abs(f[k]) / hl;
+        st.tangential[k] = std::sqrt(tx * tx + ty * ty + tz * tz);
+        st.dist[k] = std::sqrt(rx * rx + ry * ry + rz * rz);
+        // q -= h f / h2; then q += t - h (t . h) / h2 with t = p - q.
+        const double s = f[k] / h2;
+        const double ax = qx[k] - hx[k] * s, ay = qy[k] - hy[k] * s, az = qz[k] - hz[k] * s;
+        const double wx = px[k] - ax, wy = py[k] - ay, wz = pz[k] - az;
+        const double c = (wx * hx[k] + wy * hy[k] + wz * hz[k]) / h2;
+        st.nx[k] = ax + (wx - hx[k] * c);
+        st.ny[k] = ay + (wy - hy[k] * c);
+        st.nz[k] = az + (wz - hz[k] * c);
     }
 }
 
@@ -118,45 +160,35 @@ void Implicit::footPoints(const double* x, const double* y, const double* z,
     }
     const double converged = kConverged * query.tolerance;
     for (int round = 0; m > 0; ++round) {
-        this->values(qx, qy, qz, f, m);
-        gradients(qx, qy, qz, hx, hy, hz, m);
+        valuesAndGradients(qx, qy, qz, f, hx, hy, hz, m);
+        RoundState st;
+        smoothRound(px, py, pz, qx, qy, qz, f, hx, hy, hz, m, st);
         const bool last = round + 1 == kMaxRounds;
         std::size_t kept = 0;
         for (std::size_t k = 0; k < m; ++k) {
-            const Vec3d h(hx[k], hy[k], hz[k]), p(px[k], py[k], pz[k]);
-            Vec3d q(qx[k], qy[k], qz[k]);
-            const double h2 = h.lengthSqr();
-            if (!(h2 > 0.0) || !std::isfinite(h2)) continue; // no gradient: not certified
-            const double hl = std::sqrt(h2);
-            const Vec3d r = p - q, nrm = h / hl;
-            const double off = std::abs(f[k]) / hl, tangential = (r - nrm * dot(r, nrm)).length();
-            if ((off <= converged && tangential <= converged) || last) {
+            if (!st.valid[k]) continue; // no gradient: not certified
+            if ((st.off[k] <= converged && st.tangential[k] <= converged) || last) {
                 // Certify q: on the surface, p on its normal, and the distance near the
                 // first-order estimate.
                 const std::size_t i = idx[k];
-                const double d = std::copysign(r.length(), values[i]), e = out.distance[i];
-                if (off <= query.tolerance && tangential <= query.tolerance &&
+                const double d = std::copysign(st.dist[k], values[i]), e = out.distance[i];
+                if (st.off[k] <= query.tolerance && st.tangential[k] <= query.tolerance &&
                     std::abs(d - e) <= kEstimateAgreement * std::abs(e) + query.tolerance) {
                     out.distance[i] = d;
-                    out.x[i] = q[0];
-                    out.y[i] = q[1];
-                    out.z[i] = q[2];
+                    out.x[i] = qx[k];
+                    out.y[i] = qy[k];
+                    out.z[i] = qz[k];
                     out.ok[i] = true;
                 }
                 continue;
             }
-            // Onto the surface along the gradient, then along the tangent plane towards the
-            // foot of the perpendicular from p.
-            q -= h * (f[k] / h2);
-            const Vec3d t = p - q;
-            q += t - h * (dot(t, h) / h2);
             idx[kept] = idx[k];
             px[kept] = px[k];
             py[kept] = py[k];
             pz[kept] = pz[k];
-            qx[kept] = q[0];
-            qy[kept] = q[1];
-            qz[kept] = q[2];
+            qx[kept] = st.nx[k];
+            qy[kept] = st.ny[k];
+            qz[kept] = st.nz[k];
             ++kept;
         }
         m = kept;
@@ -386,15 +418,16 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
 
 } // namespace
 
-void Csg::footPoints(const double* x, const double* y, const double* z, const double* values,
-                     std::size_t n, const FootQuery& query, FootPoints& out) const
+namespace {
+
+/// Csg::footPoints at every point (the children's distances, then the lead rule or the nearest
+/// point inside).
+void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
+                   const double* y, const double* z, std::size_t n, const FootQuery& query,
+                   FootPoints& out)
 {
-    if (mChildren.size() == 1) {
-        mChildren[0]->footPoints(x, y, z, values, n, query, out);
-        return;
-    }
-    CsgTerms terms(mChildren, mOp, x, y, z, n, query);
-    const double rho = mOp == Op::Union ? 1.0 : -1.0;
+    CsgTerms terms(children, op, x, y, z, n, query);
+    const double rho = op == Csg::Op::Union ? 1.0 : -1.0;
     for (std::size_t i = 0; i < n; ++i) {
         // The deciding term (by distance) and the next.
         std::size_t first = 0;
@@ -427,6 +460,50 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
         out.x[i] = q[0];
         out.y[i] = q[1];
         out.z[i] = q[2];
+    }
+}
+
+} // namespace
+
+void Csg::footPoints(const double* x, const double* y, const double* z, const double* values,
+                     std::size_t n, const FootQuery& query, FootPoints& out) const
+{
+    if (mChildren.size() == 1) {
+        mChildren[0]->footPoints(x, y, z, values, n, query, out);
+        return;
+    }
+    bool exact = !query.feet;
+    for (const auto& c : mChildren) exact = exact && c->isExactSdf();
+    if (!exact) {
+        csgFootPoints(mChildren, mOp, x, y, z, n, query, out);
+        return;
+    }
+    // Children that are all exact distances: where the node is outside every term (rho f > 0;
+    // a union's outside, an intersection's or a difference's inside) its value is the distance
+    // (the lead rule with the deciding term >= 0), and no child need be evaluated again there.
+    // Only the other points go through the terms.
+    const double rho = mOp == Op::Union ? 1.0 : -1.0;
+    std::size_t idx[kMaxBatch], m = 0;
+    double sx[kMaxBatch], sy[kMaxBatch], sz[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        out.x[i] = x[i];
+        out.y[i] = y[i];
+        out.z[i] = z[i];
+        out.distance[i] = values[i];
+        out.ok[i] = rho * values[i] > 0.0;
+        if (out.ok[i]) continue;
+        idx[m] = i;
+        sx[m] = x[i], sy[m] = y[i], sz[m] = z[i];
+        ++m;
+    }
+    if (m == 0) return;
+    FootPoints sub;
+    csgFootPoints(mChildren, mOp, sx, sy, sz, m, query, sub);
+    for (std::size_t k = 0; k < m; ++k) {
+        const std::size_t i = idx[k];
+        out.distance[i] = sub.distance[k];
+        out.ok[i] = sub.ok[k];
+        out.x[i] = sub.x[k], out.y[i] = sub.y[k], out.z[i] = sub.z[k];
     }
 }
 

@@ -25,6 +25,14 @@ void Implicit::values(const double* x, const double* y, const double* z, double*
     for (std::size_t i = 0; i < n; ++i) out[i] = value(Vec3d(x[i], y[i], z[i]));
 }
 
+void Implicit::valuesAndGradients(const double* x, const double* y, const double* z,
+                                  double* out, double* gx, double* gy, double* gz,
+                                  std::size_t n) const
+{
+    values(x, y, z, out, n);
+    gradients(x, y, z, gx, gy, gz, n);
+}
+
 void Implicit::intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
                          std::size_t n, double* lo, double* hi) const
 {

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Primitives.h>
 
+#include "../util/Simd.h"
 #include "Checks.h"
 
 #include <openvdb/Exceptions.h>
@@ -114,15 +115,26 @@ Vec3d Sphere::gradient(const Vec3d& p) const
     return len > 0.0 ? d / len : Vec3d(0.0, 0.0, 1.0);
 }
 
+IVDB_VECTOR_CLONES
 void Sphere::gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                        double* gz, std::size_t n) const
 {
+    // gradient()'s arithmetic (Vec3d::length, then a division per component), written out into
+    // local arrays (which alias nothing) so that the loop vectorizes.
+    const double cx = mCenter[0], cy = mCenter[1], cz = mCenter[2];
+    double ux[kMaxBatch], uy[kMaxBatch], uz[kMaxBatch];
     for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d g = gradient(Vec3d(x[i], y[i], z[i])); // inlined: the same arithmetic
-        gx[i] = g[0];
-        gy[i] = g[1];
-        gz[i] = g[2];
+        const double dx = x[i] - cx, dy = y[i] - cy, dz = z[i] - cz;
+        const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
+        const bool ok = len > 0.0;
+        const double l = ok ? len : 1.0;
+        ux[i] = ok ? dx / l : 0.0;
+        uy[i] = ok ? dy / l : 0.0;
+        uz[i] = ok ? dz / l : 1.0;
     }
+    std::copy(ux, ux + n, gx);
+    std::copy(uy, uy + n, gy);
+    std::copy(uz, uz + n, gz);
 }
 
 void Sphere::values(const double* x, const double* y, const double* z, double* out,

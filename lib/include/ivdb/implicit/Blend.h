@@ -84,6 +84,10 @@ public:
                 std::size_t n) const override;
     void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                    double* gz, std::size_t n) const override;
+    /// The children evaluated once, and the super-elliptic kernel's exponentials shared by the
+    /// value and the weights.
+    void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
+                            double* gx, double* gy, double* gz, std::size_t n) const override;
     /// Exact SDF children: where the deciding child leads the next by the kernel's reach and
     /// swell (the lead rule, docs/method.md#true-distances), its distance and foot point; the
     /// smooth iteration elsewhere.

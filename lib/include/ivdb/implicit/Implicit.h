@@ -67,6 +67,11 @@ public:
     /// @brief Gradients at @a n <= kMaxBatch points: the same as gradient() at each point.
     virtual void gradients(const double* x, const double* y, const double* z, double* gx,
                            double* gy, double* gz, std::size_t n) const;
+    /// @brief values() and gradients() at once, bit for bit theirs. The default calls both;
+    /// nodes whose two share work (a blend's children and exponentials) override it.
+    virtual void valuesAndGradients(const double* x, const double* y, const double* z,
+                                    double* out, double* gx, double* gy, double* gz,
+                                    std::size_t n) const;
     /// @brief True signed distances to the surface at @a n <= kMaxBatch points, found locally,
     /// with their foot points (docs/method.md#true-distances).
     /// @details @a values are value() at the points. An exact SDF returns its values and the
