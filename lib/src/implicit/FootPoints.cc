@@ -5,6 +5,7 @@
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Modifiers.h>
+#include <ivdb/implicit/Primitives.h>
 
 #include "../util/Simd.h"
 #include "Feet.h"
@@ -249,9 +250,77 @@ bool creasePoint(const Implicit& a, const Implicit& b, const Vec3d& p, Vec3d q, 
     return false;
 }
 
+/// What the crease of two children offers a point: its nearest point, no crease at all, or
+/// nothing certain (the iteration did not converge).
+enum class Crease { Found, None, Failed };
+
+/// The crease of two spheres is a circle, or nothing where they do not cut each other: the
+/// circle's point nearest @a p in closed form (any of them for a point on its axis).
+Crease sphereCrease(const Sphere& a, const Sphere& b, const Vec3d& p, Vec3d& out)
+{
+    const Vec3d axis = b.center() - a.center();
+    const double d = axis.length(), ra = a.radius(), rb = b.radius();
+    if (!(d > std::abs(ra - rb)) || !(d < ra + rb)) return Crease::None;
+    const Vec3d u = axis / d;
+    const double t = (d * d + ra * ra - rb * rb) / (2.0 * d);
+    const double rho = std::sqrt(std::max(ra * ra - t * t, 0.0));
+    const Vec3d centre = a.center() + u * t;
+    Vec3d w = (p - centre) - u * dot(p - centre, u);
+    double len = w.length();
+    if (!(len > 1e-12 * (d + ra))) { // on the axis: every point of the circle is as near
+        w = std::abs(u[0]) < 0.9 ? u.cross(Vec3d(1, 0, 0)) : u.cross(Vec3d(0, 1, 0));
+        len = w.length();
+    }
+    out = centre + w * (rho / len);
+    return Crease::Found;
+}
+
+/// The nearest point of the crease of @a a and @a b to @a p: in closed form for two spheres,
+/// else by creasePoint() from @a start.
+Crease nearestCreasePoint(const Implicit& a, const Implicit& b, const Vec3d& p,
+                          const Vec3d& start, double tol, Vec3d& out)
+{
+    const auto* sa = dynamic_cast<const Sphere*>(&a);
+    const auto* sb = dynamic_cast<const Sphere*>(&b);
+    if (sa && sb) return sphereCrease(*sa, *sb, p, out);
+    return creasePoint(a, b, p, start, tol, out) ? Crease::Found : Crease::Failed;
+}
+
 } // namespace
 
 namespace {
+
+/// The points where three spheres' surfaces meet, in closed form (trilateration): their count
+/// (0 to 2) into @a out, or -1 if @a f are not all spheres. Centres on one line give no
+/// isolated points (the spheres meet in a circle or not at all): 0.
+int sphereCorners(const std::array<const Implicit*, 3>& f, Vec3d out[2])
+{
+    const Sphere* s[3];
+    for (int k = 0; k < 3; ++k) {
+        s[k] = dynamic_cast<const Sphere*>(f[k]);
+        if (!s[k]) return -1;
+    }
+    const Vec3d p1 = s[0]->center(), d12 = s[1]->center() - p1, d13 = s[2]->center() - p1;
+    const double d = d12.length();
+    if (!(d > 0.0)) return 0;
+    const Vec3d ex = d12 / d;
+    const double i = dot(ex, d13);
+    Vec3d ey = d13 - ex * i;
+    const double j = ey.length();
+    if (!(j > 1e-9 * (d + d13.length()))) return 0;
+    ey /= j;
+    const Vec3d ez = ex.cross(ey);
+    const double r1 = s[0]->radius(), r2 = s[1]->radius(), r3 = s[2]->radius();
+    const double x = (r1 * r1 - r2 * r2 + d * d) / (2.0 * d);
+    const double y = (r1 * r1 - r3 * r3 + i * i + j * j) / (2.0 * j) - (i / j) * x;
+    const double z2 = r1 * r1 - x * x - y * y;
+    if (!(z2 >= 0.0)) return 0;
+    const double z = std::sqrt(z2);
+    const Vec3d base = p1 + ex * x + ey * y;
+    out[0] = base + ez * z;
+    out[1] = base - ez * z;
+    return z > 0.0 ? 2 : 1;
+}
 
 /// The point where the surfaces of @a f[0..2] meet nearest @a start: Newton's method on the
 /// three values (a 3x3 system a step). Certified when q is on all three within @a tol.
@@ -392,19 +461,29 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
             const std::size_t ca = mNear[a], cb = mNear[b];
             Vec3d start, q;
             foot(ca, i, start);
-            if (!creasePoint(*mChildren[ca], *mChildren[cb], p, start, mQuery.tolerance, q)) {
+            const Crease crease = nearestCreasePoint(*mChildren[ca], *mChildren[cb], p, start,
+                                                     mQuery.tolerance, q);
+            if (crease == Crease::None) continue; // the two surfaces do not meet
+            if (crease == Crease::Failed) {
                 complete = false;
                 continue;
             }
             if (outsideOthers(q, {ca, cb})) offer(q);
-            // Where a third surface cuts this crease near q: a corner.
+            // Where a third surface cuts this crease: a corner (both of three spheres' in
+            // closed form, else the one Newton's method finds from q).
             for (std::size_t k = b + 1; k < mNear.size() && !beyond(mNear[k]); ++k) {
                 const std::size_t cc = mNear[k];
-                Vec3d corner;
-                if (cornerPoint({mChildren[ca].get(), mChildren[cb].get(), mChildren[cc].get()},
-                                q, mQuery.tolerance, corner) &&
-                    outsideOthers(corner, {ca, cb, cc})) {
-                    offer(corner);
+                const std::array<const Implicit*, 3> f{mChildren[ca].get(), mChildren[cb].get(),
+                                                       mChildren[cc].get()};
+                Vec3d corners[2];
+                const int found = sphereCorners(f, corners);
+                if (found >= 0) {
+                    for (int c = 0; c < found; ++c) {
+                        if (outsideOthers(corners[c], {ca, cb, cc})) offer(corners[c]);
+                    }
+                } else if (cornerPoint(f, q, mQuery.tolerance, corners[0]) &&
+                           outsideOthers(corners[0], {ca, cb, cc})) {
+                    offer(corners[0]);
                 }
             }
         }
