@@ -275,13 +275,12 @@ Crease sphereCrease(const Sphere& a, const Sphere& b, const Vec3d& p, Vec3d& out
     return Crease::Found;
 }
 
-/// The nearest point of the crease of @a a and @a b to @a p: in closed form for two spheres,
-/// else by creasePoint() from @a start.
-Crease nearestCreasePoint(const Implicit& a, const Implicit& b, const Vec3d& p,
-                          const Vec3d& start, double tol, Vec3d& out)
+/// The nearest point of the crease of @a a and @a b to @a p: in closed form for two spheres
+/// (@a sa and @a sb, null for other shapes), else by creasePoint() from @a start.
+Crease nearestCreasePoint(const Implicit& a, const Implicit& b, const Sphere* sa,
+                          const Sphere* sb, const Vec3d& p, const Vec3d& start, double tol,
+                          Vec3d& out)
 {
-    const auto* sa = dynamic_cast<const Sphere*>(&a);
-    const auto* sb = dynamic_cast<const Sphere*>(&b);
     if (sa && sb) return sphereCrease(*sa, *sb, p, out);
     return creasePoint(a, b, p, start, tol, out) ? Crease::Found : Crease::Failed;
 }
@@ -291,13 +290,11 @@ Crease nearestCreasePoint(const Implicit& a, const Implicit& b, const Vec3d& p,
 namespace {
 
 /// The points where three spheres' surfaces meet, in closed form (trilateration): their count
-/// (0 to 2) into @a out, or -1 if @a f are not all spheres. Centres on one line give no
-/// isolated points (the spheres meet in a circle or not at all): 0.
-int sphereCorners(const std::array<const Implicit*, 3>& f, Vec3d out[2])
+/// (0 to 2) into @a out, or -1 if one of @a s is null (not a sphere). Centres on one line give
+/// no isolated points (the spheres meet in a circle or not at all): 0.
+int sphereCorners(const std::array<const Sphere*, 3>& s, Vec3d out[2])
 {
-    const Sphere* s[3];
     for (int k = 0; k < 3; ++k) {
-        s[k] = dynamic_cast<const Sphere*>(f[k]);
         if (!s[k]) return -1;
     }
     const Vec3d p1 = s[0]->center(), d12 = s[1]->center() - p1, d13 = s[2]->center() - p1;
@@ -368,6 +365,7 @@ public:
           mValues(children.size()), mFeet(children.size())
     {
         for (std::size_t c = 0; c < children.size(); ++c) {
+            mSphere.push_back(dynamic_cast<const Sphere*>(children[c].get()));
             children[c]->values(x, y, z, mValues[c].data(), n);
             if (children[c]->isExactSdf()) continue;
             mFeet[c] = std::make_unique<FootPoints>();
@@ -397,7 +395,8 @@ public:
             q = Vec3d(mFeet[c]->x[i], mFeet[c]->y[i], mFeet[c]->z[i]);
             return mFeet[c]->ok[i];
         }
-        const Vec3d p(mX[i], mY[i], mZ[i]), g = mChildren[c]->gradient(p);
+        const Vec3d p(mX[i], mY[i], mZ[i]);
+        const Vec3d g = mSphere[c] ? (p - mSphere[c]->center()).unitSafe() : mChildren[c]->gradient(p);
         const double len = g.length();
         q = p - g * (len > 0.0 ? mValues[c][i] / len : 0.0);
         return len > 0.5 && len < 1.5; // an exact SDF's gradient is a unit vector
@@ -416,7 +415,9 @@ private:
     {
         for (std::size_t c = 0; c < mChildren.size(); ++c) {
             if (std::find(on.begin(), on.end(), c) != on.end()) continue;
-            if (sign(c) * mChildren[c]->value(q) < -mQuery.tolerance) return false;
+            const double v = mSphere[c] ? (q - mSphere[c]->center()).length() - mSphere[c]->radius()
+                                        : mChildren[c]->value(q);
+            if (sign(c) * v < -mQuery.tolerance) return false;
         }
         return true;
     }
@@ -427,6 +428,7 @@ private:
     const FootQuery& mQuery;
     std::vector<std::array<double, kMaxBatch>> mValues;
     std::vector<std::unique_ptr<FootPoints>> mFeet;
+    std::vector<const Sphere*> mSphere; // the children that are spheres (closed forms), else null
     std::vector<std::size_t> mNear; // reused across points
 };
 
@@ -461,8 +463,8 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
             const std::size_t ca = mNear[a], cb = mNear[b];
             Vec3d start, q;
             foot(ca, i, start);
-            const Crease crease = nearestCreasePoint(*mChildren[ca], *mChildren[cb], p, start,
-                                                     mQuery.tolerance, q);
+            const Crease crease = nearestCreasePoint(*mChildren[ca], *mChildren[cb], mSphere[ca],
+                                                     mSphere[cb], p, start, mQuery.tolerance, q);
             if (crease == Crease::None) continue; // the two surfaces do not meet
             if (crease == Crease::Failed) {
                 complete = false;
@@ -476,7 +478,7 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
                 const std::array<const Implicit*, 3> f{mChildren[ca].get(), mChildren[cb].get(),
                                                        mChildren[cc].get()};
                 Vec3d corners[2];
-                const int found = sphereCorners(f, corners);
+                const int found = sphereCorners({mSphere[ca], mSphere[cb], mSphere[cc]}, corners);
                 if (found >= 0) {
                     for (int c = 0; c < found; ++c) {
                         if (outsideOthers(corners[c], {ca, cb, cc})) offer(corners[c]);

@@ -137,6 +137,7 @@ void Sphere::gradients(const double* x, const double* y, const double* z, double
     std::copy(uz, uz + n, gz);
 }
 
+IVDB_VECTOR_CLONES
 void Sphere::values(const double* x, const double* y, const double* z, double* out,
                     std::size_t n) const
 {

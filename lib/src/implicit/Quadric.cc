@@ -210,7 +210,7 @@ struct EigenQuadric
                          q2 * (d2 * q2 + 2.0 * b2) + c;
         const double r0 = a - q0, r1 = b - q1, r2 = e - q2;
         dist = std::sqrt(r0 * r0 + r1 * r1 + r2 * r2);
-        return std::min({e0, e1, e2}) > 0.0 && glq > 0.0 && std::abs(g) <= tol * glq &&
+        return std::min(e0, std::min(e1, e2)) > 0.0 && glq > 0.0 && std::abs(g) <= tol * glq &&
                std::abs(dist - est) <= agreement * est + tol;
     }
 };
@@ -231,14 +231,17 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         return;
     }
     // Newton's method on g(mu) (EigenQuadric) from the first-order mu = f / |grad f|^2. It
-    // converges quadratically: two steps for all points (a loop the compiler vectorizes), more
-    // only where the surface curves strongly within the distance.
+    // converges quadratically: three steps for all points (a loop the compiler vectorizes; the
+    // third is below 1e-6 mu almost everywhere in the band), more only where the surface curves
+    // strongly within the distance.
     const EigenQuadric q(mEigen, mLinear, mQ[3][3]);
     const double normA = std::max({std::abs(q.d0), std::abs(q.d1), std::abs(q.d2)});
     double p0[kMaxBatch], p1[kMaxBatch], p2[kMaxBatch], mu[kMaxBatch], step[kMaxBatch];
     // The points in the eigenframe, their gradients and first-order estimates (a loop that
     // vectorizes), then the ones near enough to need the foot point, compacted.
     double e[kMaxBatch], gl[kMaxBatch];
+    bool near[kMaxBatch];
+    const double far = query.far, reach = normA * query.far * query.far;
     for (std::size_t i = 0; i < n; ++i) {
         p0[i] = mFrame[0][0] * x[i] + mFrame[1][0] * y[i] + mFrame[2][0] * z[i];
         p1[i] = mFrame[0][1] * x[i] + mFrame[1][1] * y[i] + mFrame[2][1] * z[i];
@@ -247,37 +250,35 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
                      g2 = 2.0 * (q.d2 * p2[i] + q.b2);
         gl[i] = std::sqrt(g0 * g0 + g1 * g1 + g2 * g2);
         e[i] = values[i] / gl[i];
-    }
-    std::size_t idx[kMaxBatch], m = 0;
-    for (std::size_t i = 0; i < n; ++i) {
         const double v = values[i];
-        out.x[i] = x[i];
-        out.y[i] = y[i];
-        out.z[i] = z[i];
-        out.ok[i] = false;
-        if (!(gl[i] > 0.0) || !std::isfinite(gl[i])) {
-            out.distance[i] = v > 0.0 ? query.far : -query.far;
-            continue;
-        }
-        out.distance[i] = e[i];
+        const bool valid = gl[i] > 0.0 && std::isfinite(gl[i]);
         // f(p + h) = f(p) + grad f . h + h^T A h: no surface within far of p if |f| exceeds
         // what the two terms can take away (then |e| > far too).
-        if (v == 0.0 || std::abs(v) > gl[i] * query.far + normA * query.far * query.far) {
-            out.ok[i] = true;
-            continue;
-        }
-        idx[m] = i;
-        p0[m] = p0[i];
-        p1[m] = p1[i];
-        p2[m] = p2[i];
+        const bool beyond = v == 0.0 || std::abs(v) > gl[i] * far + reach;
+        out.distance[i] = valid ? e[i] : (v > 0.0 ? far : -far);
+        out.ok[i] = valid && beyond;
+        near[i] = valid && !beyond;
         // The first-order multiplier, moved inside (lo, hi) if it is not.
         double u = v / (gl[i] * gl[i]);
         u = u <= q.lo ? 0.5 * q.lo : u;
         u = u >= q.hi ? 0.5 * q.hi : u;
-        mu[m] = u;
-        ++m;
+        mu[i] = u;
     }
-    for (int round = 0; round < 2; ++round) {
+    std::copy(x, x + n, out.x);
+    std::copy(y, y + n, out.y);
+    std::copy(z, z + n, out.z);
+    // The near points compacted, without branches (every point is written, and the next
+    // overwrites it unless it is near).
+    std::size_t idx[kMaxBatch], m = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        idx[m] = i;
+        p0[m] = p0[i];
+        p1[m] = p1[i];
+        p2[m] = p2[i];
+        mu[m] = mu[i];
+        m += near[i] ? 1 : 0;
+    }
+    for (int round = 0; round < 3; ++round) {
         for (std::size_t k = 0; k < m; ++k) step[k] = q.newtonStep(p0[k], p1[k], p2[k], mu[k]);
     }
     for (std::size_t k = 0; k < m; ++k) {
@@ -326,6 +327,7 @@ Vec3d Quadric::gradient(const Vec3d& p) const
     return g;
 }
 
+IVDB_VECTOR_CLONES
 void Quadric::values(const double* x, const double* y, const double* z, double* out,
                      std::size_t n) const
 {
