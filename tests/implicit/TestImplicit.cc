@@ -621,9 +621,20 @@ TEST_F(TestImplicit, IntervalContainsValues)
 
 TEST_F(TestImplicit, BatchIntervalsAgreeWithIntervalAndContainValues)
 {
-    // intervals() over boxes of one size (Quadric's own loop, the default elsewhere) equals
-    // interval() per box up to rounding, and so contains the values in each box.
-    for (const Case& c : allCases()) {
+    // intervals() over boxes of one size (the loops of quadrics, spheres and blends, the default
+    // elsewhere) equals interval() per box up to rounding, and so contains the values in each box.
+    std::vector<Case> cases = allCases();
+    const auto sphere = std::make_shared<Sphere>(kSphereC, kSphereR);
+    const auto box = std::make_shared<Box>(kBoxC, kBoxSize);
+    const auto torus = std::make_shared<Torus>(kTorusC, kMajor, kMinor);
+    for (auto op : {Csg::Op::Union, Csg::Op::Intersection, Csg::Op::Difference}) {
+        cases.push_back({"blend", std::make_shared<Blend>(op, 4.0, std::vector<Ptr>{sphere, box, torus}),
+                         nullptr});
+        cases.push_back({"smooth", std::make_shared<Blend>(op, BlendKernel::polynomial(0.3),
+                                                           std::vector<Ptr>{sphere, torus}),
+                         nullptr});
+    }
+    for (const Case& c : cases) {
         for (double size : {0.01, 0.2, 3.0}) {
             const Vec3d half(0.5 * size, 0.3 * size, 0.7 * size);
             std::vector<double> x(kMaxBatch), y(kMaxBatch), z(kMaxBatch), lo(kMaxBatch),

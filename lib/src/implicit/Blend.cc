@@ -6,6 +6,9 @@
 
 #include <openvdb/Exceptions.h>
 
+#include "../util/Simd.h"
+#include "FastMath.h"
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -38,7 +41,70 @@ private:
 /// without the call.
 inline double superEllipticTerm(double s, double p, double t, double e)
 {
-    return t == e ? 1.0 : std::exp(s * p * (t - e));
+    return t == e ? 1.0 : detail::expNonPositive(s * p * (t - e));
+}
+
+/// The super-elliptic blend over a batch of @a n points: @a terms term-major (@a m rows of n).
+/// Writes the values into @a out and the weights d f / d t into @a w (m rows of n), either null.
+/// Points innermost, so the loops vectorize; per point, the operations and their order of
+/// blendTerms() and superEllipticWeights(), so the same bits.
+IVDB_VECTOR_CLONES
+void superEllipticBatch(CsgOp op, double p, const double* terms, std::size_t m, std::size_t n,
+                        double* out, double* w)
+{
+    const double s = op == CsgOp::Union ? -1.0 : 1.0;
+    double e[kMaxBatch], sum[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) e[i] = terms[i];
+    for (std::size_t c = 1; c < m; ++c) {
+        const double* t = terms + c * n;
+        if (s < 0.0) {
+            for (std::size_t i = 0; i < n; ++i) e[i] = std::min(e[i], t[i]);
+        } else {
+            for (std::size_t i = 0; i < n; ++i) e[i] = std::max(e[i], t[i]);
+        }
+    }
+    for (std::size_t i = 0; i < n; ++i) sum[i] = 0.0;
+    for (std::size_t c = 0; c < m; ++c) {
+        const double* t = terms + c * n;
+        if (w) {
+            double* wc = w + c * n;
+            for (std::size_t i = 0; i < n; ++i) {
+                wc[i] = superEllipticTerm(s, p, t[i], e[i]);
+                sum[i] += wc[i];
+            }
+        } else {
+            for (std::size_t i = 0; i < n; ++i) sum[i] += superEllipticTerm(s, p, t[i], e[i]);
+        }
+    }
+    if (out) {
+        for (std::size_t i = 0; i < n; ++i) out[i] = e[i] + s * detail::logPositive(sum[i]) / p;
+    }
+    if (w) {
+        for (std::size_t c = 0; c < m; ++c) {
+            double* wc = w + c * n;
+            for (std::size_t i = 0; i < n; ++i) wc[i] /= sum[i];
+        }
+    }
+}
+
+/// The gradients sum_c (+/-) w_c grad f_c over a batch: @a cg holds each child's gradients
+/// (3 rows of n per child), @a w the weights; the children a difference subtracts count negated.
+/// Gradient()'s sums, in its order.
+void weightedGradients(bool difference, const double* cg, const double* w, std::size_t m,
+                       std::size_t n, double* gx, double* gy, double* gz)
+{
+    for (std::size_t i = 0; i < n; ++i) gx[i] = gy[i] = gz[i] = 0.0;
+    for (std::size_t c = 0; c < m; ++c) {
+        const double* g = cg + 3 * c * n;
+        const double* wc = w + c * n;
+        const double sign = difference && c > 0 ? -1.0 : 1.0;
+        for (std::size_t i = 0; i < n; ++i) {
+            const double k = sign * wc[i];
+            gx[i] += g[i] * k;
+            gy[i] += g[n + i] * k;
+            gz[i] += g[2 * n + i] * k;
+        }
+    }
 }
 
 /// The weights d f / d t_i = exp(s p (t_i - e)) / sum of a super-elliptic blend's terms.
@@ -140,7 +206,7 @@ double blendTerms(Csg::Op op, double p, const double* t, std::size_t n)
     for (std::size_t i = 1; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
     double sum = 0.0;
     for (std::size_t i = 0; i < n; ++i) sum += superEllipticTerm(s, p, t[i], e);
-    return e + s * std::log(sum) / p;
+    return e + s * detail::logPositive(sum) / p;
 }
 
 Blend::Blend(Op op, double p, std::vector<Ptr> children)
@@ -194,35 +260,47 @@ Vec3d Blend::gradient(const Vec3d& p) const
     return g;
 }
 
+namespace {
+
+/// A blend's children over a batch as terms (term-major, negated where a difference subtracts
+/// them) and, if @a cg is not null, their gradients (3 rows of n per child).
+void childTerms(const std::vector<Implicit::Ptr>& children, bool difference, const double* x,
+                const double* y, const double* z, std::size_t n, double* terms, double* cg)
+{
+    for (std::size_t c = 0; c < children.size(); ++c) {
+        double* row = terms + c * n;
+        children[c]->values(x, y, z, row, n);
+        if (difference && c > 0) {
+            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
+        }
+        if (cg) {
+            double* g = cg + 3 * c * n;
+            children[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
+        }
+    }
+}
+
+} // namespace
+
 void Blend::gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                       double* gz, std::size_t n) const
 {
-    // The children's values and gradients in term-major buffers, then per point as gradient().
+    // The children's values and gradients in term-major buffers, then as gradient() per point.
     const std::size_t m = mChildren.size();
-    std::vector<double> terms(m * n), cg(3 * m * n);
-    for (std::size_t c = 0; c < m; ++c) {
-        double* row = terms.data() + c * n;
-        mChildren[c]->values(x, y, z, row, n);
-        if (mOp == Op::Difference && c > 0) {
-            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
+    const bool difference = mOp == Op::Difference;
+    std::vector<double> terms(m * n), cg(3 * m * n), w(m * n);
+    childTerms(mChildren, difference, x, y, z, n, terms.data(), cg.data());
+    if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
+        superEllipticBatch(mOp, mKernel.p, terms.data(), m, n, nullptr, w.data());
+    } else {
+        std::vector<double> t(m), wp(m);
+        for (std::size_t i = 0; i < n; ++i) {
+            for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
+            mKernel.weights(mOp, t.data(), m, wp.data());
+            for (std::size_t c = 0; c < m; ++c) w[c * n + i] = wp[c];
         }
-        double* g = cg.data() + 3 * c * n;
-        mChildren[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
     }
-    std::vector<double> t(m), w(m);
-    for (std::size_t i = 0; i < n; ++i) {
-        for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
-        mKernel.weights(mOp, t.data(), m, w.data());
-        Vec3d g(0.0);
-        for (std::size_t c = 0; c < m; ++c) {
-            const double* cgc = cg.data() + 3 * c * n;
-            const Vec3d gi(cgc[i], cgc[n + i], cgc[2 * n + i]);
-            g += gi * ((mOp == Op::Difference && c > 0) ? -w[c] : w[c]);
-        }
-        gx[i] = g[0];
-        gy[i] = g[1];
-        gz[i] = g[2];
-    }
+    weightedGradients(difference, cg.data(), w.data(), m, n, gx, gy, gz);
 }
 
 void Blend::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
@@ -232,56 +310,26 @@ void Blend::valuesAndGradients(const double* x, const double* y, const double* z
         Implicit::valuesAndGradients(x, y, z, out, gx, gy, gz, n);
         return;
     }
-    // values() and gradients() in one pass: the same terms, exponentials, sums and products in
-    // the same order (blendTerms, superEllipticWeights), so the same bits.
+    // values() and gradients() in one pass: the children once, and the exponentials shared by
+    // the value and the weights (the same operations in the same order, so the same bits).
     const std::size_t m = mChildren.size();
-    std::vector<double> terms(m * n), cg(3 * m * n);
-    for (std::size_t c = 0; c < m; ++c) {
-        double* row = terms.data() + c * n;
-        mChildren[c]->values(x, y, z, row, n);
-        if (mOp == Op::Difference && c > 0) {
-            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
-        }
-        double* g = cg.data() + 3 * c * n;
-        mChildren[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
-    }
-    const double s = mOp == Op::Union ? -1.0 : 1.0, p = mKernel.p;
-    std::vector<double> w(m);
-    for (std::size_t i = 0; i < n; ++i) {
-        double e = terms[i];
-        for (std::size_t c = 1; c < m; ++c) {
-            e = s < 0.0 ? std::min(e, terms[c * n + i]) : std::max(e, terms[c * n + i]);
-        }
-        double sum = 0.0;
-        for (std::size_t c = 0; c < m; ++c) {
-            w[c] = superEllipticTerm(s, p, terms[c * n + i], e);
-            sum += w[c];
-        }
-        out[i] = e + s * std::log(sum) / p;
-        Vec3d g(0.0);
-        for (std::size_t c = 0; c < m; ++c) {
-            const double* cgc = cg.data() + 3 * c * n;
-            const double wc = w[c] / sum;
-            g += Vec3d(cgc[i], cgc[n + i], cgc[2 * n + i]) * ((mOp == Op::Difference && c > 0) ? -wc : wc);
-        }
-        gx[i] = g[0];
-        gy[i] = g[1];
-        gz[i] = g[2];
-    }
+    const bool difference = mOp == Op::Difference;
+    std::vector<double> terms(m * n), cg(3 * m * n), w(m * n);
+    childTerms(mChildren, difference, x, y, z, n, terms.data(), cg.data());
+    superEllipticBatch(mOp, mKernel.p, terms.data(), m, n, out, w.data());
+    weightedGradients(difference, cg.data(), w.data(), m, n, gx, gy, gz);
 }
 
 void Blend::values(const double* x, const double* y, const double* z, double* out,
                    std::size_t n) const
 {
-    // Children into a term-major buffer, then combine per point exactly as value() does.
+    // Children into a term-major buffer, then combined per point exactly as value() does.
     const std::size_t m = mChildren.size();
     std::vector<double> terms(m * n);
-    for (std::size_t c = 0; c < m; ++c) {
-        double* row = terms.data() + c * n;
-        mChildren[c]->values(x, y, z, row, n);
-        if (mOp == Op::Difference && c > 0) {
-            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
-        }
+    childTerms(mChildren, mOp == Op::Difference, x, y, z, n, terms.data(), nullptr);
+    if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
+        superEllipticBatch(mOp, mKernel.p, terms.data(), m, n, out, nullptr);
+        return;
     }
     std::vector<double> t(m);
     for (std::size_t i = 0; i < n; ++i) {
@@ -301,6 +349,37 @@ Interval Blend::interval(const BBoxd& box) const
         hi[c] = iv.hi;
     }
     return {mKernel.combine(mOp, lo.data(), m), mKernel.combine(mOp, hi.data(), m)};
+}
+
+void Blend::intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                      std::size_t n, double* lo, double* hi) const
+{
+    // interval() per box, the children's in batches and the blend of the bounds in one loop.
+    const std::size_t m = mChildren.size();
+    std::vector<double> tlo(m * n), thi(m * n);
+    for (std::size_t c = 0; c < m; ++c) {
+        double* l = tlo.data() + c * n;
+        double* h = thi.data() + c * n;
+        mChildren[c]->intervals(cx, cy, cz, half, n, l, h);
+        if (mOp == Op::Difference && c > 0) {
+            for (std::size_t i = 0; i < n; ++i) {
+                const double a = l[i];
+                l[i] = -h[i];
+                h[i] = -a;
+            }
+        }
+    }
+    if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
+        superEllipticBatch(mOp, mKernel.p, tlo.data(), m, n, lo, nullptr);
+        superEllipticBatch(mOp, mKernel.p, thi.data(), m, n, hi, nullptr);
+        return;
+    }
+    std::vector<double> a(m), b(m);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t c = 0; c < m; ++c) a[c] = tlo[c * n + i], b[c] = thi[c * n + i];
+        lo[i] = mKernel.combine(mOp, a.data(), m);
+        hi[i] = mKernel.combine(mOp, b.data(), m);
+    }
 }
 
 BBoxd Blend::boundingBox() const

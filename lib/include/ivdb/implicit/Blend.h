@@ -95,6 +95,8 @@ public:
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     /// Exact for a blend of exact intervals: the blend is monotone in every child.
     Interval interval(const BBoxd& box) const override;
+    void intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                   std::size_t n, double* lo, double* hi) const override;
     /// Union: the children's boxes grown by BlendKernel::swell() when every child is exact
     /// outside (the blend reaches at most that far beyond them), else unbounded. Intersection,
     /// difference: within the sharp result.

@@ -21,6 +21,8 @@ public:
     void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                    double* gz, std::size_t n) const override;
     Interval interval(const BBoxd& box) const override;
+    void intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                   std::size_t n, double* lo, double* hi) const override;
     BBoxd boundingBox() const override;
     bool isExactSdf() const override { return true; }
     std::string typeName() const override { return "sphere"; }
