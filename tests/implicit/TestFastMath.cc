@@ -58,4 +58,7 @@ TEST(TestFastMath, LogIsWithinTwoUlpOfLibm)
     }
     EXPECT_LE(worst, 2.0);
     EXPECT_EQ(logPositive(1.0), 0.0);
+    EXPECT_TRUE(std::isnan(logPositive(std::numeric_limits<double>::quiet_NaN())));
+    EXPECT_EQ(logPositive(std::numeric_limits<double>::infinity()),
+              std::numeric_limits<double>::infinity());
 }

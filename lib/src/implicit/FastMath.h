@@ -58,7 +58,7 @@ inline double expNonPositive(double x)
     return x < -708.0 ? 0.0 : e * scale;
 }
 
-/// log(y) for a normal y > 0 within 2 ulp: y = 2^k m with m in [sqrt(1/2), sqrt(2)), and
+/// log(y) for a normal y > 0 within 2 ulp (NaN and +inf as they come): y = 2^k m with m in [sqrt(1/2), sqrt(2)), and
 /// log(m) = 2 atanh(s), s = (m - 1) / (m + 1), |s| < 0.172, by its series to s^23 (the rest is
 /// below 1e-18 relative).
 inline double logPositive(double y)
@@ -85,7 +85,8 @@ inline double logPositive(double y)
     const double logm = 2.0 * s + 2.0 * s * (z * t);
     // k as a double through the same rounding constant (k is small).
     const double kd = fromBits(toBits(kRound) + k) - kRound;
-    return (kd * kLn2Hi + logm) + kd * kLn2Lo;
+    const double result = (kd * kLn2Hi + logm) + kd * kLn2Lo;
+    return y - y == 0.0 ? result : y; // NaN stays NaN, +inf stays +inf
 }
 
 } // namespace ivdb::implicit::detail
