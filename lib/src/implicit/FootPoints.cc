@@ -57,6 +57,37 @@ void exactFootPoints(const Implicit& f, const double* x, const double* y, const 
     }
 }
 
+/// The smooth iteration's start, for every point at once (a loop that vectorizes): the
+/// first-order estimate e = f / |grad f| as the distance, certified where f = 0 or |e| is beyond
+/// twice @a far (only "farther" matters there: the estimate's error is second order in the
+/// distance, a factor 2 only where the surface curves within it), +/- far where there is no
+/// gradient (a singular point: no local answer); @a near marks the points that iterate, from the
+/// projection q0 = p - f grad f / |grad f|^2.
+IVDB_VECTOR_CLONES
+void firstOrder(const double* __restrict x, const double* __restrict y,
+                const double* __restrict z, const double* __restrict values,
+                const double* __restrict gx, const double* __restrict gy,
+                const double* __restrict gz, std::size_t n, double far,
+                FootPoints& __restrict out, bool* __restrict near, double* __restrict qx,
+                double* __restrict qy, double* __restrict qz)
+{
+    for (std::size_t i = 0; i < n; ++i) {
+        const double v = values[i], g2 = gx[i] * gx[i] + gy[i] * gy[i] + gz[i] * gz[i];
+        const bool valid = g2 > 0.0 && std::isfinite(g2);
+        const double e = v / std::sqrt(g2);
+        const bool done = v == 0.0 || std::abs(e) >= 2.0 * far;
+        out.x[i] = x[i];
+        out.y[i] = y[i];
+        out.z[i] = z[i];
+        out.distance[i] = valid ? e : (v > 0.0 ? far : -far);
+        out.ok[i] = valid && done;
+        near[i] = valid && !done;
+        qx[i] = x[i] - v * gx[i] / g2;
+        qy[i] = y[i] - v * gy[i] / g2;
+        qz[i] = z[i] - v * gz[i] / g2;
+    }
+}
+
 /// One round of the smooth iteration, for every point at once (a loop that vectorizes): at the
 /// current point q (value f, gradient h) of query point p, whether h is usable, q's distance off
 /// the surface and p's off q's normal, |p - q|, and the next point (onto the surface along h,
@@ -130,34 +161,20 @@ void Implicit::footPoints(const double* x, const double* y, const double* z,
     std::size_t idx[kMaxBatch];
     double px[kMaxBatch], py[kMaxBatch], pz[kMaxBatch], qx[kMaxBatch], qy[kMaxBatch],
         qz[kMaxBatch], f[kMaxBatch], hx[kMaxBatch], hy[kMaxBatch], hz[kMaxBatch];
+    bool near[kMaxBatch];
+    firstOrder(x, y, z, values, gx, gy, gz, n, query.far, out, near, qx, qy, qz);
+    // The near points compacted, without branches (every point is written, and the next
+    // overwrites it unless it is near).
     std::size_t m = 0;
     for (std::size_t i = 0; i < n; ++i) {
-        const double v = values[i], g2 = gx[i] * gx[i] + gy[i] * gy[i] + gz[i] * gz[i];
-        out.x[i] = x[i];
-        out.y[i] = y[i];
-        out.z[i] = z[i];
-        out.ok[i] = false;
-        if (!(g2 > 0.0) || !std::isfinite(g2)) {
-            // No gradient (a singular point): no local answer.
-            out.distance[i] = v > 0.0 ? query.far : -query.far;
-            continue;
-        }
-        const double e = v / std::sqrt(g2); // the first-order estimate
-        out.distance[i] = e;
-        if (v == 0.0 || std::abs(e) >= 2.0 * query.far) {
-            // On the surface, or far enough that only "farther" matters: the estimate's error is
-            // second order in the distance, a factor 2 only where the surface curves within it.
-            out.ok[i] = true;
-            continue;
-        }
         idx[m] = i;
         px[m] = x[i];
         py[m] = y[i];
         pz[m] = z[i];
-        qx[m] = x[i] - v * gx[i] / g2;
-        qy[m] = y[i] - v * gy[i] / g2;
-        qz[m] = z[i] - v * gz[i] / g2;
-        ++m;
+        qx[m] = qx[i];
+        qy[m] = qy[i];
+        qz[m] = qz[i];
+        m += near[i] ? 1 : 0;
     }
     const double converged = kConverged * query.tolerance;
     for (int round = 0; m > 0; ++round) {
