@@ -465,6 +465,10 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     double best = std::numeric_limits<double>::max();
     nearest = p;
     bool complete = true; // every candidate was found
+    // Every term within reach a sphere: feet, creases and corners all in closed form, so finding
+    // none outside the other terms proves the nearest surface point lies beyond far.
+    bool closedForms = true;
+    for (std::size_t c : mNear) closedForms = closedForms && mSphere[c] != nullptr;
     auto offer = [&](const Vec3d& q) {
         const double d = (p - q).length();
         if (d < best) best = d, nearest = q;
@@ -509,9 +513,12 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     }
     depth = std::min(best, mQuery.far);
     // Certified if every candidate was found, or the best reaches the lower bound |u| of the
-    // distance (inside the union the distance is at least the deepest term's depth).
-    return best < std::numeric_limits<double>::max() &&
-           (complete || best <= -u + mQuery.tolerance);
+    // distance (inside the union the distance is at least the deepest term's depth). With none
+    // found, only closed forms prove that the surface lies beyond far (a point of it lies on some
+    // term's surface, at least that term's |distance| away; here a crease point lies in a sphere
+    // too far away to be asked, and the arc's ends are farther still): then depth = far.
+    const bool found = best < std::numeric_limits<double>::max();
+    return (complete && (found || closedForms)) || (found && best <= -u + mQuery.tolerance);
 }
 
 } // namespace
