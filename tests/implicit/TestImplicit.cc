@@ -261,6 +261,26 @@ std::vector<Case> allCases()
     return c;
 }
 
+/// @a cases and blends of every operation (no kink model: for the batch checks): super-elliptic
+/// of two and three children, and the polynomial smooth CSG.
+std::vector<Case> withBlends(std::vector<Case> cases)
+{
+    const Ptr sphere = std::make_shared<Sphere>(kSphereC, kSphereR);
+    const Ptr box = std::make_shared<Box>(kBoxC, kBoxSize);
+    const Ptr torus = std::make_shared<Torus>(kTorusC, kMajor, kMinor);
+    for (auto op : {Csg::Op::Union, Csg::Op::Intersection, Csg::Op::Difference}) {
+        cases.push_back({"blend2", std::make_shared<Blend>(op, 4.0, std::vector<Ptr>{sphere, box}),
+                         nullptr});
+        cases.push_back({"blend3", std::make_shared<Blend>(op, 30.0,
+                                                           std::vector<Ptr>{sphere, box, torus}),
+                         nullptr});
+        cases.push_back({"smooth", std::make_shared<Blend>(op, BlendKernel::polynomial(0.3),
+                                                           std::vector<Ptr>{sphere, torus}),
+                         nullptr});
+    }
+    return cases;
+}
+
 } // namespace
 
 class TestImplicit: public ::testing::Test
@@ -553,20 +573,9 @@ TEST_F(TestImplicit, BatchValuesMatchValueBitForBit)
 TEST_F(TestImplicit, BatchGradientsAndTheFusedCallMatchBitForBit)
 {
     // gradients() equals gradient() at each point, and valuesAndGradients() equals values() and
-    // gradients(), bit for bit: for every node, and for super-elliptic blends (their own fused
-    // loop, sharing the exponentials) of two and three children, a difference among them.
-    std::vector<Case> cases = allCases();
-    const auto sphere = std::make_shared<Sphere>(kSphereC, kSphereR);
-    const auto box = std::make_shared<Box>(kBoxC, kBoxSize);
-    const auto torus = std::make_shared<Torus>(kTorusC, kMajor, kMinor);
-    for (auto op : {Csg::Op::Union, Csg::Op::Intersection, Csg::Op::Difference}) {
-        cases.push_back({"blend2", std::make_shared<Blend>(op, 4.0, std::vector<Ptr>{sphere, box}),
-                         nullptr});
-        cases.push_back({"blend3", std::make_shared<Blend>(op, 30.0,
-                                                           std::vector<Ptr>{sphere, box, torus}),
-                         nullptr});
-    }
-    for (const Case& c : cases) {
+    // gradients(), bit for bit: for every node, and for blends of every operation (the
+    // super-elliptic kernel's own fused loop shares the exponentials).
+    for (const Case& c : withBlends(allCases())) {
         for (std::size_t n : {std::size_t(1), std::size_t(37), kMaxBatch}) {
             std::vector<double> x(n), y(n), z(n), gx(n), gy(n), gz(n), v(n), fv(n), fx(n),
                 fy(n), fz(n);
@@ -623,18 +632,7 @@ TEST_F(TestImplicit, BatchIntervalsAgreeWithIntervalAndContainValues)
 {
     // intervals() over boxes of one size (the loops of quadrics, spheres and blends, the default
     // elsewhere) equals interval() per box up to rounding, and so contains the values in each box.
-    std::vector<Case> cases = allCases();
-    const auto sphere = std::make_shared<Sphere>(kSphereC, kSphereR);
-    const auto box = std::make_shared<Box>(kBoxC, kBoxSize);
-    const auto torus = std::make_shared<Torus>(kTorusC, kMajor, kMinor);
-    for (auto op : {Csg::Op::Union, Csg::Op::Intersection, Csg::Op::Difference}) {
-        cases.push_back({"blend", std::make_shared<Blend>(op, 4.0, std::vector<Ptr>{sphere, box, torus}),
-                         nullptr});
-        cases.push_back({"smooth", std::make_shared<Blend>(op, BlendKernel::polynomial(0.3),
-                                                           std::vector<Ptr>{sphere, torus}),
-                         nullptr});
-    }
-    for (const Case& c : cases) {
+    for (const Case& c : withBlends(allCases())) {
         for (double size : {0.01, 0.2, 3.0}) {
             const Vec3d half(0.5 * size, 0.3 * size, 0.7 * size);
             std::vector<double> x(kMaxBatch), y(kMaxBatch), z(kMaxBatch), lo(kMaxBatch),

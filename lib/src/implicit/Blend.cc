@@ -46,14 +46,18 @@ inline double superEllipticTerm(double s, double p, double t, double e)
 
 /// The super-elliptic blend over a batch of @a n points: @a terms term-major (@a m rows of n).
 /// Writes the values into @a out and the weights d f / d t into @a w (m rows of n), either null.
-/// Points innermost, so the loops vectorize; per point, the operations and their order of
-/// blendTerms() and superEllipticWeights(), so the same bits.
-IVDB_VECTOR_CLONES
-void superEllipticBatch(CsgOp op, double p, const double* terms, std::size_t m, std::size_t n,
-                        double* out, double* w)
+/// Points innermost (n <= MaxPoints), so the loops vectorize. The one definition of the
+/// kernel's arithmetic: single points (value(), gradient(), the grid blend) are batches of one,
+/// so every path gives the same bits.
+template<std::size_t MaxPoints>
+inline void superEllipticPoints(CsgOp op, double p, const double* terms, std::size_t m,
+                                std::size_t n, double* out, double* w)
 {
+    // s = -1 for a union (a soft min), +1 for an intersection or difference (a soft max):
+    // f = s (1/p) ln sum exp(s p t_i) = e + s (1/p) ln sum exp(s p (t_i - e)), e the extreme term,
+    // so every exponent is <= 0 and the largest is exactly 0: no overflow, the sum is >= 1.
     const double s = op == CsgOp::Union ? -1.0 : 1.0;
-    double e[kMaxBatch], sum[kMaxBatch];
+    double e[MaxPoints], sum[MaxPoints];
     for (std::size_t i = 0; i < n; ++i) e[i] = terms[i];
     for (std::size_t c = 1; c < m; ++c) {
         const double* t = terms + c * n;
@@ -87,6 +91,15 @@ void superEllipticBatch(CsgOp op, double p, const double* terms, std::size_t m, 
     }
 }
 
+/// superEllipticPoints() for batches, compiled for SSE2 and AVX2 (single points call it inline,
+/// as batches of one).
+IVDB_VECTOR_CLONES
+void superEllipticBatch(CsgOp op, double p, const double* terms, std::size_t m, std::size_t n,
+                        double* out, double* w)
+{
+    superEllipticPoints<kMaxBatch>(op, p, terms, m, n, out, w);
+}
+
 /// The gradients sum_c (+/-) w_c grad f_c over a batch: @a cg holds each child's gradients
 /// (3 rows of n per child), @a w the weights; the children a difference subtracts count negated.
 /// Gradient()'s sums, in its order.
@@ -105,20 +118,6 @@ void weightedGradients(bool difference, const double* cg, const double* w, std::
             gz[i] += g[2 * n + i] * k;
         }
     }
-}
-
-/// The weights d f / d t_i = exp(s p (t_i - e)) / sum of a super-elliptic blend's terms.
-void superEllipticWeights(CsgOp op, double p, const double* t, std::size_t n, double* w)
-{
-    const double s = op == CsgOp::Union ? -1.0 : 1.0;
-    double e = t[0];
-    for (std::size_t i = 0; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
-    double sum = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-        w[i] = superEllipticTerm(s, p, t[i], e);
-        sum += w[i];
-    }
-    for (std::size_t i = 0; i < n; ++i) w[i] /= sum;
 }
 
 /// One step of the smooth fold: the smooth min (union) or max (intersection, difference) of
@@ -165,7 +164,7 @@ double BlendKernel::combine(CsgOp op, const double* t, std::size_t n) const
 
 void BlendKernel::weights(CsgOp op, const double* t, std::size_t n, double* w) const
 {
-    if (kind == Kind::SuperElliptic) return superEllipticWeights(op, p, t, n, w);
+    if (kind == Kind::SuperElliptic) return superEllipticPoints<1>(op, p, t, n, 1, nullptr, w);
     // Forward through the fold s_i = step(s_{i-1}, t_i), keeping d s_i / d t_i in w[i] and
     // d s_i / d s_{i-1} in a; then backward: d f / d t_i = w[i] times the later a's.
     Scratch a(n);
@@ -198,15 +197,9 @@ std::string BlendKernel::describe() const
 
 double blendTerms(Csg::Op op, double p, const double* t, std::size_t n)
 {
-    // s = -1 for a union (a soft min), +1 for an intersection or difference (a soft max):
-    // f = s (1/p) ln sum exp(s p t_i) = e + s (1/p) ln sum exp(s p (t_i - e)), e the extreme term,
-    // so every exponent is <= 0 and the largest is exactly 0: no overflow, the sum is >= 1.
-    const double s = op == Csg::Op::Union ? -1.0 : 1.0;
-    double e = t[0];
-    for (std::size_t i = 1; i < n; ++i) e = s < 0.0 ? std::min(e, t[i]) : std::max(e, t[i]);
-    double sum = 0.0;
-    for (std::size_t i = 0; i < n; ++i) sum += superEllipticTerm(s, p, t[i], e);
-    return e + s * detail::logPositive(sum) / p;
+    double f;
+    superEllipticPoints<1>(op, p, t, n, 1, &f, nullptr); // one point: its n terms are a column
+    return f;
 }
 
 Blend::Blend(Op op, double p, std::vector<Ptr> children)
