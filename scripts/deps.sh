@@ -5,7 +5,7 @@ set -euo pipefail
 
 packages=(
   cmake g++ ccache make pkg-config
-  libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev zlib1g-dev libimath-dev
+  libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev liblz4-dev zlib1g-dev libimath-dev
   libcli11-dev nlohmann-json3-dev
   libgtest-dev libbenchmark-dev
   libopenvdb-tools python3-openvdb python3-numpy python3-matplotlib libpng-dev libopenexr-dev

@@ -24,6 +24,8 @@
 
 #include <blosc.h>
 
+#include "BloscLz4.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_group.h>
@@ -40,6 +42,9 @@
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
+#endif
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
 #endif
 
 namespace ivdb::io {
@@ -152,6 +157,67 @@ inline openvdb::Index64 notEqualBits(const openvdb::Vec3s* v, const openvdb::Vec
     }
     return bits;
 }
+
+/// The active ones of 64 values (bit k of @a word set: value k active), appended in order at
+/// @a out + @a count; returns the new count. Stores may reach up to 7 values beyond the new
+/// count, never beyond out + count + 64.
+template<typename ValueT>
+openvdb::Index compactWord(const ValueT* src, openvdb::Index64 word, ValueT* out, openvdb::Index count)
+{
+    // Branch-free: every value is stored, and the next store overwrites it unless its voxel is
+    // active (no chain of bit scans).
+    for (openvdb::Index k = 0; k < 64; ++k) {
+        out[count] = src[k];
+        count += openvdb::Index((word >> k) & 1);
+    }
+    return count;
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+/// For each 8-bit mask, the positions of its set bits in order (then zeros): the permutation
+/// that packs 8 floats' active ones to the front.
+struct PackTable
+{
+    alignas(32) std::int32_t lanes[256][8] = {};
+    constexpr PackTable()
+    {
+        for (int m = 0; m < 256; ++m) {
+            int n = 0;
+            for (int b = 0; b < 8; ++b) {
+                if (m & (1 << b)) lanes[m][n++] = b;
+            }
+        }
+    }
+};
+constexpr PackTable kPackTable;
+
+/// compactWord() for floats with AVX2: 8 values a step, packed by a permutation from the table
+/// and stored whole (about ten times fewer instructions than the loop over values).
+__attribute__((target("avx2,popcnt")))
+openvdb::Index compactWordAvx2(const float* src, openvdb::Index64 word, float* out, openvdb::Index count)
+{
+    for (int g = 0; g < 8; ++g) {
+        const unsigned m = unsigned(word >> (8 * g)) & 0xffu;
+        const __m256 v = _mm256_loadu_ps(src + 8 * g);
+        const __m256i lanes = _mm256_load_si256(reinterpret_cast<const __m256i*>(kPackTable.lanes[m]));
+        _mm256_storeu_ps(out + count, _mm256_permutevar8x32_ps(v, lanes));
+        count += openvdb::Index(__builtin_popcount(m));
+    }
+    return count;
+}
+
+inline bool hasAvx2()
+{
+    static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
+    return yes;
+}
+
+inline openvdb::Index compactWord(const float* src, openvdb::Index64 word, float* out, openvdb::Index count)
+{
+    if (hasAvx2()) return compactWordAvx2(src, word, out, count);
+    return compactWord<float>(src, word, out, count);
+}
+#endif
 
 inline bool hasNaN(float v) { return std::isnan(v); }
 inline bool hasNaN(const openvdb::Vec3s& v)
@@ -501,12 +567,7 @@ private:
         MaskT select;
         for (openvdb::Index w = 0; w < MaskT::WORD_COUNT; ++w) {
             const openvdb::Index64 word = on.template getWord<openvdb::Index64>(w);
-            // Branch-free compaction: every value is stored, and the next store overwrites it
-            // unless its voxel is active (no chain of bit scans).
-            for (openvdb::Index k = 0; k < 64; ++k) {
-                active[count] = src[w * 64 + k];
-                count += openvdb::Index((word >> k) & 1);
-            }
+            count = compactWord(src + w * 64, word, active, count);
             if (!selection) continue;
             // The inactive voxels that hold the second inactive value.
             openvdb::Index64 pick = 0;
@@ -528,7 +589,8 @@ private:
 
     /// io::writeData(os, values, count, flags): with Blosc, compressed straight into @a out (the
     /// string @a os appends to), as io::bloscToStream compresses (level 9, byte shuffle of 4-byte
-    /// words, LZ4, one block, one thread), without its temporary buffer and copy.
+    /// words, LZ4, one block, one thread), without its temporary buffer and copy, and without
+    /// LZ4's clearing of its table for every plane (detail::bloscLz4Compress).
     void writeValues(std::ostream& os, std::string& out, const ValueT* values, openvdb::Index count) const
     {
         if (!(mGridFlags & openvdb::io::COMPRESS_BLOSC)) {
@@ -538,9 +600,7 @@ private:
         const std::size_t bytes = std::size_t(count) * sizeof(ValueT);
         const std::size_t at = out.size();
         out.resize(at + 8 + bytes + BLOSC_MAX_OVERHEAD);
-        const int stored = blosc_compress_ctx(9, BLOSC_SHUFFLE, sizeof(float), bytes, values,
-                                              &out[at + 8], bytes + BLOSC_MAX_OVERHEAD,
-                                              BLOSC_LZ4_COMPNAME, bytes, 1);
+        const int stored = detail::bloscLz4Compress(values, bytes, &out[at + 8]);
         // Stored raw (minus its size first) when Blosc fails, as io::bloscToStream does.
         const std::int64_t size = stored > 0 ? std::int64_t(stored) : -std::int64_t(bytes);
         if (stored <= 0) std::memcpy(&out[at + 8], values, bytes);
