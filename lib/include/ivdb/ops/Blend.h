@@ -40,10 +40,13 @@ double blendReach(double p, double toleranceWorld);
 /// operation by more than the tolerance only where two inputs are within blendReach() of each
 /// other near the output band: the crease. So the result is the sharp operation (OpenVDB's csg
 /// tools, as csg()) everywhere except around the crease, found on a mask with one voxel per leaf
-/// node: there each input's band is extended by fast sweeping (openvdb::tools::dilateSdf) on a
-/// clipped copy, the values are combined with the same log-sum-exp as the scene-level blend,
-/// estimated as distances f / |grad f| and re-distanced (levelset::redistance) into a narrow band
-/// of the finest input's half width. The cost grows with the crease, not with the band.
+/// node: there each input's band is extended (by closest points, or fast sweeping beyond 8
+/// voxels), and each voxel the blend changes gets its distance to the blend of the two inputs'
+/// tangent planes there, re-linearized at the nearest point until it settles. Where that does
+/// not apply (three inputs within reach, inputs facing each other across a gap), the values are
+/// combined with the same log-sum-exp as the scene-level blend, estimated as distances
+/// f / |grad f| and re-distanced (levelset::redistance). docs/method.md#grid-blend. The cost
+/// grows with the crease, not with the band.
 /// @throw ParamError for a bad p, k or tolerance, or fewer than two inputs
 /// @throw openvdb::RuntimeError if the extension would not fit in memory (the message suggests
 /// the scene-level blend), or on interruption
@@ -100,7 +103,7 @@ public:
     /// @brief The origins of the leaves compute()'s splice may write (a superset).
     std::vector<openvdb::Coord> leavesWritten() const;
     /// @brief The blend's values where they differ from the sharp operation's: the bands grown
-    /// around the crease, the blended values, re-distanced. Reads only the leavesRead() of
+    /// around the crease and the distances to the blended surface there. Reads only the leavesRead() of
     /// @a grids (the grids given to the constructor, or the same with other leaves' values
     /// missing).
     /// @throw openvdb::RuntimeError on interruption

@@ -1,0 +1,137 @@
+// SPDX-License-Identifier: Apache-2.0
+#include "BlendDistance.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace ivdb::ops::detail {
+
+UnionKernel UnionKernel::inUnits(const implicit::BlendKernel& kernel, double unit)
+{
+    UnionKernel out;
+    out.polynomial = kernel.kind == implicit::BlendKernel::Kind::Polynomial;
+    out.p = kernel.p * unit;
+    out.k = kernel.k / unit;
+    return out;
+}
+
+namespace {
+
+/// h and its first two derivatives in the iteration's variable t (logit w for the
+/// super-elliptic kernel, w for the smooth minimum).
+struct Sample
+{
+    double t = 0.0, w = 0.5, h = 0.0, d1 = 0.0, d2 = 0.0, q = 1.0;
+};
+
+
+class SupportDistance
+{
+public:
+    SupportDistance(const UnionKernel& kernel, double a, double b, double c)
+        : mK(kernel), mA(a), mB(b), mC(std::max(-1.0, std::min(1.0, c))) {}
+
+    Sample at(double t) const
+    {
+        Sample s;
+        s.t = t;
+        double w, S, S1, S2, dw, d2w; // S(w), S'(w), S''(w); dw/dt, d2w/dt2
+        if (mK.polynomial) {
+            w = t;
+            S = mK.k * w * (1.0 - w);
+            S1 = mK.k * (1.0 - 2.0 * w);
+            S2 = -2.0 * mK.k;
+            dw = 1.0;
+            d2w = 0.0;
+        } else {
+            // w = 1 / (1 + e^-t); ln w = -softplus(-t), ln(1 - w) = -softplus(t), all from
+            // e = e^-|t|.
+            const double e = std::exp(-std::abs(t)), l = std::log1p(e);
+            w = t >= 0.0 ? 1.0 / (1.0 + e) : e / (1.0 + e);
+            const double lnW = -(std::max(-t, 0.0) + l), ln1W = -(std::max(t, 0.0) + l);
+            const double ww = w * (1.0 - w);
+            S = -(w * lnW + (1.0 - w) * ln1W) / mK.p;
+            S1 = -t / mK.p;
+            S2 = -1.0 / (mK.p * std::max(ww, 1e-300));
+            dw = ww;
+            d2w = ww * (1.0 - 2.0 * w);
+        }
+        const double N = w * mA + (1.0 - w) * mB - S;
+        const double N1 = mA - mB - S1, N2 = -S2;
+        const double Q = 1.0 - 2.0 * (1.0 - mC) * w * (1.0 - w);
+        const double Q1 = -2.0 * (1.0 - mC) * (1.0 - 2.0 * w), Q2 = 4.0 * (1.0 - mC);
+        const double rq = 1.0 / std::sqrt(Q);
+        const double G = N1 * Q - 0.5 * N * Q1;            // h' Q^(3/2)
+        const double G1 = N2 * Q + 0.5 * N1 * Q1 - 0.5 * N * Q2;
+        const double hw = G * rq * rq * rq;
+        const double hww = G1 * rq * rq * rq - 1.5 * Q1 * G * rq * rq * rq * rq * rq;
+        s.w = w;
+        s.q = Q;
+        s.h = N * rq;
+        s.d1 = hw * dw;
+        s.d2 = hww * dw * dw + hw * d2w;
+        return s;
+    }
+
+    /// The least h from @a t0: Newton steps where h is convex, descent steps elsewhere, each
+    /// halved until h decreases.
+    Sample minimize(double t0) const
+    {
+        const double lo = mK.polynomial ? 0.0 : -60.0, hi = mK.polynomial ? 1.0 : 60.0;
+        const double maxStep = mK.polynomial ? 0.25 : 4.0;
+        Sample s = at(std::max(lo, std::min(hi, t0)));
+        for (int it = 0; it < 60; ++it) {
+            double step = s.d2 > 0.0 ? -s.d1 / s.d2 : (s.d1 > 0.0 ? -maxStep : maxStep);
+            // Where h is convex, Newton's step gains about d1^2 / (2 d2): stop when that is
+            // below what h's rounding can show.
+            if (s.d2 > 0.0 && s.d1 * s.d1 < 2e-14 * s.d2 * (1.0 + std::abs(s.h))) break;
+            step = std::max(-maxStep, std::min(maxStep, step));
+            bool moved = false;
+            for (int half = 0; half < 30; ++half, step *= 0.5) {
+                const double t = std::max(lo, std::min(hi, s.t + step));
+                if (t == s.t) break;
+                const Sample n = at(t);
+                if (n.h <= s.h) {
+                    moved = true;
+                    s = n;
+                    break;
+                }
+            }
+            if (!moved) break;
+        }
+        return s;
+    }
+
+private:
+    UnionKernel mK;
+    double mA, mB, mC;
+};
+
+} // namespace
+
+PlaneBlendDistance planeBlendDistance(const UnionKernel& kernel, double a, double b, double c,
+                                      double start)
+{
+    const SupportDistance support(kernel, a, b, c);
+    // Start at @a start, else at the kernel's own weight at x: the softmax of -p a, -p b, or
+    // the smooth minimum's gradient.
+    double t0 = kernel.polynomial ? 0.5 + (b - a) / (2.0 * kernel.k) : kernel.p * (b - a);
+    if (start >= 0.0 && start <= 1.0) {
+        t0 = kernel.polynomial ? start
+           : std::log(std::max(start, 1e-300) / std::max(1.0 - start, 1e-300));
+    }
+    Sample s = support.minimize(t0);
+    PlaneBlendDistance out;
+    out.distance = s.h;
+    out.weight = s.w;
+    // Planes facing each other (c near -1) leave Q near 0 where both weigh alike: the
+    // linearization says nothing there.
+    out.ok = std::isfinite(s.h) && s.q > 0.05;
+    // The ends are tangent planes too (the smooth minimum's flat parts; the super-elliptic
+    // blend's asymptotes): a descent that stopped in another valley is not the least.
+    if (a < out.distance) out.distance = a, out.weight = 1.0;
+    if (b < out.distance) out.distance = b, out.weight = 0.0;
+    return out;
+}
+
+} // namespace ivdb::ops::detail

@@ -1,0 +1,50 @@
+// SPDX-License-Identifier: Apache-2.0
+#pragma once
+
+/// @file BlendDistance.h
+/// @brief The distance to the blend of two planes, in closed form up to a one-dimensional
+/// minimization: what the grid blend solves at each voxel near the crease (internal to ops;
+/// tests reach it by path).
+
+#include <ivdb/implicit/Blend.h>
+
+namespace ivdb::ops::detail {
+
+/// @brief A union blend's kernel in the units of the distances it takes (voxels).
+struct UnionKernel
+{
+    bool polynomial = false;
+    double p = 0.0; ///< super-elliptic sharpness, per unit
+    double k = 0.0; ///< smooth-minimum width, in units
+
+    /// @a kernel with distances measured in units of @a unit world units.
+    static UnionKernel inUnits(const implicit::BlendKernel& kernel, double unit);
+};
+
+/// @brief The distance to the blend of two planes, and where it is attained.
+struct PlaneBlendDistance
+{
+    double distance = 0.0; ///< signed: negative inside the blended union
+    double weight = 0.5;   ///< w: the nearest point's normal is w n_a + (1 - w) n_b, normalized
+    bool ok = true;        ///< false if the planes face each other too closely to tell
+};
+
+/// @brief The signed distance from a point x to the zero set of the union blend of two planes,
+/// U(a(y), b(y)) = 0, given the planes' values at x, @a a and @a b, and the cosine @a c of the
+/// angle between their unit normals.
+/// @details The blended union's solid is the complement of K = {U >= 0}, which is convex: the
+/// kernel is concave. A convex set's boundary is the envelope of its tangent planes, and
+/// the signed distance from x to the boundary of K's complement is the least signed distance
+/// from x to those planes (exact on both sides: from inside K, the nearest supporting plane;
+/// from outside, the farthest separating one). The tangent plane where the kernel's gradient
+/// is (w, 1 - w) lies at signed distance
+///     h(w) = (w a + (1 - w) b - S(w)) / sqrt(1 - 2 (1 - c) w (1 - w))
+/// from x, where S(w) is the kernel's support term: H(w)/p for the super-elliptic blend (H the
+/// entropy -w ln w - (1 - w) ln(1 - w)) and k w (1 - w) for the smooth minimum. The distance is
+/// the least h over w in [0, 1], found by a safeguarded Newton iteration (on logit w for the
+/// super-elliptic blend, whose minimum is always inside (0, 1)), from the weight @a start if it
+/// is in [0, 1] (a previous answer's), else from the kernel's own weight at x.
+PlaneBlendDistance planeBlendDistance(const UnionKernel& kernel, double a, double b, double c,
+                                      double start = -1.0);
+
+} // namespace ivdb::ops::detail

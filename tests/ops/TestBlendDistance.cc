@@ -1,0 +1,124 @@
+// SPDX-License-Identifier: Apache-2.0
+// The distance to the blend of two planes (lib/src/ops/BlendDistance.h, internal) against a
+// brute-force search: the nearest zero of the blend along rays from the point.
+#include "../../lib/src/ops/BlendDistance.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+using namespace ivdb::ops::detail;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// The union blend of two values, straight from its formula.
+double unionBlend(const UnionKernel& k, double a, double b)
+{
+    if (k.polynomial) {
+        const double h = std::max(k.k - std::abs(a - b), 0.0) / k.k;
+        return std::min(a, b) - h * h * k.k * 0.25;
+    }
+    return std::min(a, b) - std::log1p(std::exp(-k.p * std::abs(a - b))) / k.p;
+}
+
+/// Two planes in the plane of their normals: a(y) = y.x + a0, b(y) = y . (cos t, sin t) + b0, so
+/// that at y = 0 they are a0 and b0. The signed distance from the origin to the blend's zero set:
+/// the nearest zero along rays (a fine scan, bisection), the rays' angle refined by golden section.
+class BruteForce
+{
+public:
+    BruteForce(const UnionKernel& k, double angle, double a0, double b0)
+        : mK(k), mC(std::cos(angle)), mS(std::sin(angle)), mA(a0), mB(b0) {}
+
+    double distance() const
+    {
+        const double sign = value(0.0, 0.0) < 0.0 ? -1.0 : 1.0;
+        const int coarse = 720;
+        double best = std::numeric_limits<double>::infinity(), bestAngle = 0.0;
+        for (int i = 0; i < coarse; ++i) {
+            const double t = 2.0 * kPi * i / coarse, r = rootAlong(t);
+            if (r < best) best = r, bestAngle = t;
+        }
+        double lo = bestAngle - 4.0 * kPi / coarse, hi = bestAngle + 4.0 * kPi / coarse;
+        const double g = (std::sqrt(5.0) - 1.0) / 2.0;
+        for (int it = 0; it < 60; ++it) {
+            const double m1 = hi - g * (hi - lo), m2 = lo + g * (hi - lo);
+            if (rootAlong(m1) < rootAlong(m2)) hi = m2;
+            else lo = m1;
+        }
+        return sign * std::min(best, rootAlong(0.5 * (lo + hi)));
+    }
+
+private:
+    double value(double x, double y) const
+    {
+        return unionBlend(mK, x + mA, x * mC + y * mS + mB);
+    }
+
+    /// The first zero along the ray at angle @a t (infinity if none within 20).
+    double rootAlong(double t) const
+    {
+        const double dx = std::cos(t), dy = std::sin(t);
+        const double v0 = value(0.0, 0.0);
+        double prev = 0.0;
+        for (double r = 0.01; r <= 20.0; r += 0.01) {
+            if ((value(r * dx, r * dy) < 0.0) != (v0 < 0.0)) {
+                double lo = prev, hi = r;
+                for (int it = 0; it < 60; ++it) {
+                    const double mid = 0.5 * (lo + hi);
+                    if ((value(mid * dx, mid * dy) < 0.0) != (v0 < 0.0)) hi = mid;
+                    else lo = mid;
+                }
+                return 0.5 * (lo + hi);
+            }
+            prev = r;
+        }
+        return std::numeric_limits<double>::infinity();
+    }
+
+    UnionKernel mK;
+    double mC, mS, mA, mB;
+};
+
+} // namespace
+
+TEST(TestBlendDistance, EqualsTheNearestZeroOfTheBlendOfTwoPlanes)
+{
+    UnionKernel kernels[6];
+    const double ps[3] = {0.4, 1.5, 6.0};
+    const double ks[3] = {1.0, 4.0, 12.0};
+    for (int i = 0; i < 3; ++i) {
+        kernels[i].p = ps[i];
+        kernels[3 + i].polynomial = true;
+        kernels[3 + i].k = ks[i];
+    }
+    int checked = 0, refused = 0;
+    double worst = 0.0;
+    for (const UnionKernel& k : kernels) {
+        for (const double degrees : {15.0, 50.0, 90.0, 130.0, 165.0}) {
+            const double angle = degrees * kPi / 180.0;
+            for (double a = -3.0; a <= 3.01; a += 1.5) {
+                for (double b = -3.0; b <= 3.01; b += 1.25) {
+                    const PlaneBlendDistance d = planeBlendDistance(k, a, b, std::cos(angle));
+                    if (!d.ok) {
+                        // Only planes that nearly face each other (165 degrees apart) are refused.
+                        EXPECT_GT(degrees, 150.0) << a << " " << b;
+                        ++refused;
+                        continue;
+                    }
+                    const double ref = BruteForce(k, angle, a, b).distance();
+                    worst = std::max(worst, std::abs(d.distance - ref));
+                    ASSERT_NEAR(d.distance, ref, 1e-6)
+                        << (k.polynomial ? "k " : "p ") << (k.polynomial ? k.k : k.p) << ", "
+                        << degrees << " degrees, a " << a << ", b " << b;
+                    ++checked;
+                }
+            }
+        }
+    }
+    EXPECT_GT(checked, 600);
+    std::printf("worst difference %.2e over %d points, %d refused\n", worst, checked, refused);
+}
