@@ -76,8 +76,9 @@ void addBlend(CLI::App& app, Action& action)
         "rounds the crease within about ln(2)/p world units. With -k, the smooth minimum of width "
         "k: union min(fA, fB) - h^2 k/4 with h = max(k - |fA - fB|, 0)/k, intersection max + "
         "h^2 k/4; it changes the sharp result only where the inputs are within k. Each input's "
-        "band is first extended as far as p or k needs, and the result is re-distanced into a "
-        "narrow band 'surface'");
+        "band is first extended as far as p or k needs around the crease, where each voxel the "
+        "blend changes gets its distance to the blended surface; the result is a narrow band "
+        "'surface'");
     auto a = addCombineOptions(cmd);
     addBlendOptions(cmd, a->p, a->k, a->job.tolerance);
     cmd.onRun(action, [a]() { return runCombine(*a, true); });

@@ -992,7 +992,7 @@ std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& reg
            << plan.kernel.describe() << " (reach "
            << util::formatNumber(std::round(plan.reachVox * 10) / 10) << " voxels; "
            << util::formatNumber(double(region.activeVoxelCount()))
-           << " voxels around the crease re-distanced)";
+           << " voxels around the crease checked)";
     }
     return os.str();
 }
