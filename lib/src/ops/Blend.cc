@@ -280,6 +280,12 @@ private:
         }
     }
 
+    /// The 26 neighbours, in the order ties between equally near points are broken.
+    static inline const Coord kNeighbours[26] = {
+        {-1,-1,-1},{-1,-1,0},{-1,-1,1},{-1,0,-1},{-1,0,0},{-1,0,1},{-1,1,-1},{-1,1,0},{-1,1,1},
+        {0,-1,-1},{0,-1,0},{0,-1,1},{0,0,-1},{0,0,1},{0,1,-1},{0,1,0},{0,1,1},
+        {1,-1,-1},{1,-1,0},{1,-1,1},{1,0,-1},{1,0,0},{1,0,1},{1,1,-1},{1,1,0},{1,1,1}};
+
     /// A leaf's voxels and the shell of voxels around them, as dense arrays: which are known,
     /// and their closest points and normals (set where known).
     struct Neighbourhood
@@ -339,10 +345,6 @@ private:
     void growLeaf(const MaskTree::LeafNodeType& mask, LeafT& out, CpLeaf& outCp, CpLeaf& outN,
                   Readers& r, Neighbourhood& nb) const
     {
-        static const Coord kNeighbours[26] = {
-            {-1,-1,-1},{-1,-1,0},{-1,-1,1},{-1,0,-1},{-1,0,0},{-1,0,1},{-1,1,-1},{-1,1,0},{-1,1,1},
-            {0,-1,-1},{0,-1,0},{0,-1,1},{0,0,-1},{0,0,1},{0,1,-1},{0,1,0},{0,1,1},
-            {1,-1,-1},{1,-1,0},{1,-1,1},{1,0,-1},{1,0,0},{1,0,1},{1,1,-1},{1,1,0},{1,1,1}};
         const Coord origin = mask.origin();
         if (!gather(origin, r, nb)) {
             growLeafByVoxels(mask, out, outCp, outN, r);
@@ -387,10 +389,6 @@ private:
     void growLeafByVoxels(const MaskTree::LeafNodeType& mask, LeafT& out, CpLeaf& outCp,
                           CpLeaf& outN, Readers& r) const
     {
-        static const Coord kNeighbours[26] = {
-            {-1,-1,-1},{-1,-1,0},{-1,-1,1},{-1,0,-1},{-1,0,0},{-1,0,1},{-1,1,-1},{-1,1,0},{-1,1,1},
-            {0,-1,-1},{0,-1,0},{0,-1,1},{0,0,-1},{0,0,1},{0,1,-1},{0,1,0},{0,1,1},
-            {1,-1,-1},{1,-1,0},{1,-1,1},{1,0,-1},{1,0,0},{1,0,1},{1,1,-1},{1,1,0},{1,1,1}};
         for (auto it = mask.cbeginValueOn(); it; ++it) {
             const Coord ijk = it.getCoord();
             const openvdb::Vec3d y(ijk.x(), ijk.y(), ijk.z());
