@@ -299,6 +299,79 @@ TEST_F(TestJobs, GradientAndCurvatureAreTheOperators)
     expectParamError([&] { jobs::compareGradient(cmp); }, "step", keep);
 }
 
+// The CLI's gradient and curvature (keepGrids false) compute, compress and write a run of 8192
+// leaves at a time: the file must be the one the whole grids make, byte for byte but the UUID
+// (36 bytes from offset 21), on a sphere of more than two runs, with each grid kind and option.
+TEST_F(TestJobs, StreamedGradientAndCurvatureWriteTheSameFile)
+{
+    jobs::RasterizeOptions ro;
+    ro.scene = data("sphere.json");
+    ro.output = path("s.vdb");
+    ro.voxelSize = 0.004;
+    jobs::rasterize(ro);
+    const auto phi = jobs::readLevelSet(path("s.vdb"));
+    ASSERT_GT(phi->tree().leafCount(), 2u * 8192u);
+    auto bytes = [this](const std::string& name) {
+        std::ifstream in(path(name), std::ios::binary);
+        std::string b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        EXPECT_GT(b.size(), 100u) << name;
+        return b.size() > 57 ? b.substr(0, 21) + b.substr(57) : b;
+    };
+    struct GradientCase
+    {
+        bool magnitude, withInput;
+        io::Compression compression;
+        bool half;
+    };
+    for (const GradientCase& gc : {GradientCase{true, true, io::Compression::Blosc, false},
+                                   GradientCase{false, false, io::Compression::Zip, true},
+                                   GradientCase{false, true, io::Compression::None, false}}) {
+        jobs::GradientOptions g;
+        g.input = path("s.vdb");
+        g.magnitude = gc.magnitude;
+        g.withInput = gc.withInput;
+        g.write.compression = gc.compression;
+        g.write.half = gc.half;
+        g.output = path("whole.vdb");
+        const jobs::GradientResult whole = jobs::gradient(g);
+        g.output = path("runs.vdb");
+        g.keepGrids = false;
+        const jobs::GradientResult runs = jobs::gradient(g);
+        EXPECT_EQ(runs.gradient, nullptr);
+        EXPECT_EQ(runs.activeVoxels, whole.activeVoxels);
+        EXPECT_EQ(whole.activeVoxels, std::uint64_t(phi->activeVoxelCount()));
+        EXPECT_TRUE(bytes("runs.vdb") == bytes("whole.vdb"))
+            << "gradient, magnitude " << gc.magnitude << ", input " << gc.withInput
+            << ", compression " << int(gc.compression) << ", half " << gc.half;
+    }
+    for (const auto method : {jobs::CurvatureMethod::Principal, jobs::CurvatureMethod::Mean}) {
+        jobs::CurvatureOptions c;
+        c.input = path("s.vdb");
+        c.method = method;
+        c.withInput = method == jobs::CurvatureMethod::Mean;
+        c.output = path("whole.vdb");
+        const jobs::CurvatureResult whole = jobs::curvature(c);
+        c.output = path("runs.vdb");
+        c.keepGrids = false;
+        const jobs::CurvatureResult runs = jobs::curvature(c);
+        EXPECT_TRUE(runs.grids.empty());
+        EXPECT_EQ(runs.activeVoxels, whole.activeVoxels);
+        EXPECT_TRUE(bytes("runs.vdb") == bytes("whole.vdb")) << "curvature " << int(method);
+    }
+    // Read back by OpenVDB: the streamed gradient is the operator's.
+    const auto expected = diff::gradient(*phi, 1);
+    jobs::GradientOptions g;
+    g.input = path("s.vdb");
+    g.output = path("runs.vdb");
+    g.keepGrids = false;
+    jobs::gradient(g);
+    const auto back = openvdb::gridPtrCast<openvdb::Vec3SGrid>(readBack(path("runs.vdb"))[0]);
+    ASSERT_TRUE(back);
+    ASSERT_EQ(back->activeVoxelCount(), expected->activeVoxelCount());
+    auto acc = expected->getConstAccessor();
+    for (auto it = back->cbeginValueOn(); it; ++it) ASSERT_EQ(*it, acc.getValue(it.getCoord()));
+}
+
 TEST_F(TestJobs, ConvertKeepsTheGridsAndChecksTheFormat)
 {
     rasterize("sphere.json", "s.vdb");

@@ -22,12 +22,13 @@ int runCurvature(CurvatureArgs& a)
 {
     a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
     a.job.method = enumOf<jobs::CurvatureMethod>(a.method, jobs::curvatureMethodNames());
+    a.job.keepGrids = false; // the file is all the command wants
     const jobs::CurvatureResult r = jobs::curvature(a.job);
     if (!a.quiet) {
         std::printf("%s: %s curvature of '%s', %llu active voxels, read %.3f s, compute %.3f s, "
                     "total %.3f s -> %s\n",
                     a.job.input.c_str(), a.method.c_str(), r.input->getName().c_str(),
-                    (unsigned long long)r.grids[0]->activeVoxelCount(), r.readSeconds,
+                    (unsigned long long)r.activeVoxels, r.readSeconds,
                     r.computeSeconds, r.totalSeconds, a.job.output.c_str());
     }
     return 0;

@@ -20,12 +20,13 @@ struct GradientArgs
 int runGradient(GradientArgs& a)
 {
     a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
+    a.job.keepGrids = false; // the file is all the command wants
     const jobs::GradientResult r = jobs::gradient(a.job);
     if (!a.quiet) {
         std::printf("%s: gradient of '%s', step %d, %llu active voxels, read %.3f s, compute "
                     "%.3f s, total %.3f s -> %s\n",
                     a.job.input.c_str(), r.input->getName().c_str(), a.job.step,
-                    (unsigned long long)r.gradient->activeVoxelCount(), r.readSeconds,
+                    (unsigned long long)r.activeVoxels, r.readSeconds,
                     r.computeSeconds, r.totalSeconds, a.job.output.c_str());
     }
     return 0;

@@ -13,6 +13,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cstring>
 #include <cmath>
 #include <memory>
 #include <sstream>
@@ -60,12 +61,16 @@ public:
             for (int i = lo[0]; i < hi[0]; ++i)
             for (int j = lo[1]; j < hi[1]; ++j) {
                 float* dst = &mData[(size_t(i) * mN + j) * mN];
+                const int len = hi[2] - lo[2];
                 if (buf) {
                     const int li = i - mPad + origin[0] - o[0], lj = j - mPad + origin[1] - o[1];
                     const float* src = buf + (li << 6) + (lj << 3) + (lo[2] - mPad + origin[2] - o[2]);
-                    std::copy(src, src + (hi[2] - lo[2]), dst + lo[2]);
+                    // Whole rows by a copy of constant size (inlined, where a call to memmove
+                    // for 32 bytes cost more than the copy: 5% of `ivdb gradient`).
+                    if (len == dim) std::memcpy(dst + lo[2], src, sizeof(float) * LeafT::DIM);
+                    else for (int k = 0; k < len; ++k) dst[lo[2] + k] = src[k];
                 } else {
-                    std::fill(dst + lo[2], dst + hi[2], tile);
+                    for (int k = lo[2]; k < hi[2]; ++k) dst[k] = tile;
                 }
             }
         }

@@ -3,7 +3,9 @@
 
 #include "Common.h"
 
+#include <ivdb/io/AtomicFile.h>
 #include <ivdb/io/VdbFile.h>
+#include <ivdb/io/VdbPieces.h>
 #include <ivdb/jobs/Inputs.h>
 #include <ivdb/jobs/Rasterize.h>
 #include <ivdb/raster/Rasterize.h>
@@ -11,7 +13,107 @@
 #include <ivdb/util/Params.h>
 #include <ivdb/util/System.h>
 
+#include <chrono>
+#include <functional>
+
 namespace ivdb::jobs {
+
+namespace {
+
+/// A leaf-by-leaf operator's output grids on the leaves @a only of a level set, stamped.
+using LeafOperator =
+    std::function<std::vector<openvdb::GridBase::Ptr>(const openvdb::FloatGrid&, const diff::LeafList&)>;
+
+/// Leaves per run of streamedWrite(): a run's vec3 outputs take about 50 MB.
+constexpr std::size_t kRunLeaves = 8192;
+
+/// writeGrids() of @a op's outputs on @a phi (and @a phi itself if @a withInput), without ever
+/// holding the outputs whole: a run of kRunLeaves leaves at a time is computed, compressed
+/// (io::encodeLeafRun) and let go, and the file is laid out from the runs (io::vdbFileHead),
+/// as ivdb-mpi lays out the runs of its ranks: the same bytes. The output leaves are made and
+/// freed run by run, so the allocator hands the next run the memory the last one had (no new
+/// pages to fault in). Returns the seconds spent computing (the rest is compressing and
+/// writing) and each output's active voxels in @a activeVoxels.
+double streamedWrite(const std::string& path, const openvdb::FloatGrid& phi, const LeafOperator& op,
+                     bool withInput, const io::WriteOptions& options, std::uint64_t& activeVoxels)
+{
+    using Clock = std::chrono::steady_clock;
+    diff::LeafList leaves;
+    for (auto it = phi.tree().cbeginLeaf(); it; ++it) leaves.push_back(it.getLeaf());
+    std::vector<std::vector<io::LeafRun>> runs;   // per output grid, its runs
+    std::vector<openvdb::GridBase::Ptr> metadata; // per output grid, emptied (metadata only)
+    double computeSeconds = 0.0;
+    for (std::size_t first = 0; first < std::max<std::size_t>(leaves.size(), 1); first += kRunLeaves) {
+        const auto start = Clock::now();
+        const diff::LeafList only(leaves.begin() + std::ptrdiff_t(first),
+                                  leaves.begin() + std::ptrdiff_t(std::min(leaves.size(), first + kRunLeaves)));
+        std::vector<openvdb::GridBase::Ptr> outputs = op(phi, only);
+        computeSeconds += std::chrono::duration<double>(Clock::now() - start).count();
+        runs.resize(outputs.size());
+        for (std::size_t g = 0; g < outputs.size(); ++g) {
+            if (outputs[g]->isType<openvdb::Vec3SGrid>()) {
+                runs[g].push_back(io::encodeLeafRun(*openvdb::gridPtrCast<openvdb::Vec3SGrid>(outputs[g]), options));
+            } else {
+                runs[g].push_back(io::encodeLeafRun(*openvdb::gridPtrCast<openvdb::FloatGrid>(outputs[g]), options));
+            }
+            outputs[g]->clear(); // its metadata stays, for the skeleton
+        }
+        if (metadata.empty()) metadata = outputs;
+    }
+    if (withInput) {
+        runs.emplace_back();
+        runs.back().push_back(io::encodeLeafRun(phi, options));
+    }
+    // Each grid's nodes from the input's topology, and the file's head.
+    std::vector<io::LeafRun> entries(runs.size());
+    std::vector<openvdb::GridBase::ConstPtr> skeletons;
+    std::vector<io::HeadGrid> heads;
+    for (std::size_t g = 0; g < runs.size(); ++g) {
+        std::uint64_t bytes = 0;
+        for (const io::LeafRun& r : runs[g]) {
+            entries[g].appendEntries(r);
+            bytes += r.byteCount();
+        }
+        openvdb::GridBase::Ptr skeleton;
+        if (g == metadata.size()) { // the input, with its own metadata
+            skeleton = io::skeletonOf(phi);
+        } else {
+            if (metadata[g]->isType<openvdb::Vec3SGrid>()) {
+                skeleton = io::leafSkeleton<openvdb::Vec3SGrid>(phi.tree(), phi.transform(),
+                                                                openvdb::Vec3s(0.0f));
+            } else {
+                skeleton = io::leafSkeleton<openvdb::FloatGrid>(phi.tree(), phi.transform(), 0.0f);
+            }
+            static_cast<openvdb::MetaMap&>(*skeleton) = static_cast<const openvdb::MetaMap&>(*metadata[g]);
+        }
+        skeletons.push_back(skeleton);
+        heads.push_back({skeleton, &entries[g], bytes});
+    }
+    activeVoxels = entries.empty() ? 0 : entries[0].activeVoxels;
+    io::FileHead head = io::vdbFileHead(heads, io::fileStamp(), options);
+    for (std::size_t g = 0; g < runs.size(); ++g) head.putMasks(g, 0, entries[g].masks);
+    io::writeFileAtomically(path, [&](std::ostream& os) {
+        for (std::size_t g = 0; g < runs.size(); ++g) {
+            os.write(head.grids[g].bytes.data(), std::streamsize(head.grids[g].bytes.size()));
+            for (const io::LeafRun& r : runs[g]) {
+                for (const std::string& piece : r.pieces) {
+                    os.write(piece.data(), std::streamsize(piece.size()));
+                }
+            }
+        }
+    });
+    return computeSeconds;
+}
+
+/// Whether to write a run of leaves at a time: only the file is wanted, and the operators
+/// can take the leaves by runs (a level set with active tiles is computed whole).
+template<typename Options>
+bool streams(const Options& opt, const openvdb::FloatGrid& phi)
+{
+    return !opt.keepGrids && !opt.output.empty() && !phi.tree().hasActiveTiles();
+}
+
+} // namespace
 
 GradientResult gradient(const GradientOptions& opt)
 {
@@ -21,7 +123,22 @@ GradientResult gradient(const GradientOptions& opt)
     GradientResult result;
     result.input = readLevelSet(opt.input, opt.grid);
     result.readSeconds = clock.lap();
+    if (streams(opt, *result.input)) {
+        const std::string name = result.input->getName();
+        result.computeSeconds = streamedWrite(opt.output, *result.input,
+            [&](const openvdb::FloatGrid& phi, const diff::LeafList& only) {
+                auto g = diff::gradient(phi, opt.step, true, &only);
+                std::vector<openvdb::GridBase::Ptr> out{g};
+                if (opt.magnitude) out.push_back(diff::magnitude(*g));
+                for (auto& grid : out) stampGradient(*grid, opt, name);
+                return out;
+            }, opt.withInput, opt.write, result.activeVoxels);
+        clock.lap();
+        result.totalSeconds = clock.total();
+        return result;
+    }
     result.gradient = diff::gradient(*result.input, opt.step);
+    result.activeVoxels = result.gradient->activeVoxelCount();
     result.computeSeconds = clock.lap();
 
     if (opt.magnitude) {
@@ -92,7 +209,23 @@ CurvatureResult curvature(const CurvatureOptions& opt)
     CurvatureResult result;
     result.input = readLevelSet(opt.input, opt.grid);
     result.readSeconds = clock.lap();
+    if (streams(opt, *result.input)) {
+        const std::string name = result.input->getName();
+        result.computeSeconds = streamedWrite(opt.output, *result.input,
+            [&](const openvdb::FloatGrid& phi, const diff::LeafList& only) {
+                std::vector<openvdb::GridBase::Ptr> out;
+                for (auto& g : curvatureGrids(phi, opt.method, &only)) {
+                    stampCurvature(*g, opt, name);
+                    out.push_back(g);
+                }
+                return out;
+            }, opt.withInput, opt.write, result.activeVoxels);
+        clock.lap();
+        result.totalSeconds = clock.total();
+        return result;
+    }
     result.grids = curvatureGrids(*result.input, opt.method);
+    result.activeVoxels = result.grids.empty() ? 0 : result.grids[0]->activeVoxelCount();
     result.computeSeconds = clock.lap();
     std::vector<openvdb::GridBase::ConstPtr> out;
     for (auto& g : result.grids) {

@@ -7,6 +7,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <utility>
@@ -23,13 +24,19 @@ struct GradientOptions
     bool magnitude = false;     ///< also `gradient_magnitude`
     bool withInput = false;     ///< also copy the input level set into the output
     io::WriteOptions write;     ///< compression and half floats on disk
+    /// False: with an output file, the output grids are computed, compressed and written a run
+    /// of leaves at a time and not returned, so that they are never whole in memory (the same
+    /// file; for callers that only want the file, such as the CLI). Inputs with active tiles
+    /// are computed whole all the same.
+    bool keepGrids = true;
 };
 
 struct GradientResult
 {
     openvdb::FloatGrid::Ptr input;
-    openvdb::Vec3SGrid::Ptr gradient;
-    openvdb::FloatGrid::Ptr magnitude; ///< null unless asked for
+    openvdb::Vec3SGrid::Ptr gradient;  ///< null if not kept (GradientOptions::keepGrids)
+    openvdb::FloatGrid::Ptr magnitude; ///< null unless asked for (and kept)
+    std::uint64_t activeVoxels = 0;    ///< the gradient's
     double readSeconds = 0.0, computeSeconds = 0.0, totalSeconds = 0.0;
 };
 
@@ -53,12 +60,15 @@ struct CurvatureOptions
     CurvatureMethod method = CurvatureMethod::Mean;
     bool withInput = false;
     io::WriteOptions write;     ///< compression and half floats on disk
+    bool keepGrids = true;      ///< as GradientOptions::keepGrids
 };
 
 struct CurvatureResult
 {
     openvdb::FloatGrid::Ptr input;
-    std::vector<openvdb::FloatGrid::Ptr> grids; ///< `curvature`, or `k1` and `k2` (principal)
+    /// `curvature`, or `k1` and `k2` (principal); empty if not kept (keepGrids)
+    std::vector<openvdb::FloatGrid::Ptr> grids;
+    std::uint64_t activeVoxels = 0; ///< each grid's
     double readSeconds = 0.0, computeSeconds = 0.0, totalSeconds = 0.0;
 };
 
