@@ -213,6 +213,7 @@ private:
         bool dense = center != nullptr;
         if (dense) {
             std::fill(std::begin(on), std::end(on), false);
+            std::fill(std::begin(value), std::end(value), 0.0f); // read only where on
             for (openvdb::Index m = 0; m < LeafT::SIZE; ++m) {
                 const Coord l = LeafT::offsetToLocalCoord(m);
                 value[index(l.x(), l.y(), l.z())] = center->getValue(m);
