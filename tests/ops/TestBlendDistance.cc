@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <limits>
+#include <vector>
 
 using namespace ivdb::ops::detail;
 
@@ -97,8 +98,14 @@ TEST(TestBlendDistance, EqualsTheNearestZeroOfTheBlendOfTwoPlanes)
     }
     int checked = 0, refused = 0;
     double worst = 0.0;
+#ifdef IVDB_SANITIZED
+    // Sanitized builds run 10-20x slower: every kernel, three angles.
+    const std::vector<double> kAngles{15.0, 90.0, 165.0};
+#else
+    const std::vector<double> kAngles{15.0, 50.0, 90.0, 130.0, 165.0};
+#endif
     for (const UnionKernel& k : kernels) {
-        for (const double degrees : {15.0, 50.0, 90.0, 130.0, 165.0}) {
+        for (const double degrees : kAngles) {
             const double angle = degrees * kPi / 180.0;
             for (double a = -3.0; a <= 3.01; a += 1.5) {
                 for (double b = -3.0; b <= 3.01; b += 1.25) {
@@ -119,6 +126,10 @@ TEST(TestBlendDistance, EqualsTheNearestZeroOfTheBlendOfTwoPlanes)
             }
         }
     }
+#ifdef IVDB_SANITIZED
+    EXPECT_GT(checked, 300);
+#else
     EXPECT_GT(checked, 600);
+#endif
     std::printf("worst difference %.2e over %d points, %d refused\n", worst, checked, refused);
 }

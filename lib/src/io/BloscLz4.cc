@@ -118,8 +118,10 @@ int compressLimited(HashTable& hashTable, const Byte* src, int size, Byte* dst, 
     const Byte* ip = src;
     const Byte* anchor = src; // first literal not yet written
     const Byte* const end = src + size;
-    const Byte* const searchEnd = end - kMatchFinderLimit + 1; // a match starts before this
-    const Byte* const matchEnd = end - kLastLiterals;          // and ends by this
+    // A match starts before searchEnd and ends by matchEnd (inputs too short for one never
+    // use them).
+    const Byte* const searchEnd = size >= kMinInput ? end - kMatchFinderLimit + 1 : src;
+    const Byte* const matchEnd = size >= kMinInput ? end - kLastLiterals : src;
     Byte* op = dst;
     Byte* const outEnd = dst + capacity;
 
