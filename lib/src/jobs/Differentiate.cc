@@ -74,18 +74,9 @@ double streamedWrite(const std::string& path, const openvdb::FloatGrid& phi, con
             entries[g].appendEntries(r);
             bytes += r.byteCount();
         }
-        openvdb::GridBase::Ptr skeleton;
-        if (g == metadata.size()) { // the input, with its own metadata
-            skeleton = io::skeletonOf(phi);
-        } else {
-            if (metadata[g]->isType<openvdb::Vec3SGrid>()) {
-                skeleton = io::leafSkeleton<openvdb::Vec3SGrid>(phi.tree(), phi.transform(),
-                                                                openvdb::Vec3s(0.0f));
-            } else {
-                skeleton = io::leafSkeleton<openvdb::FloatGrid>(phi.tree(), phi.transform(), 0.0f);
-            }
-            static_cast<openvdb::MetaMap&>(*skeleton) = static_cast<const openvdb::MetaMap&>(*metadata[g]);
-        }
+        // The input, if written, with its own metadata.
+        const openvdb::GridBase::Ptr skeleton = g == metadata.size() ? io::skeletonOf(phi)
+                                                                     : operatorSkeleton(*metadata[g], phi);
         skeletons.push_back(skeleton);
         heads.push_back({skeleton, &entries[g], bytes});
     }
@@ -114,6 +105,18 @@ bool streams(const Options& opt, const openvdb::FloatGrid& phi)
 }
 
 } // namespace
+
+openvdb::GridBase::Ptr operatorSkeleton(const openvdb::GridBase& output, const openvdb::FloatGrid& phi)
+{
+    openvdb::GridBase::Ptr skeleton;
+    if (output.isType<openvdb::Vec3SGrid>()) {
+        skeleton = io::leafSkeleton<openvdb::Vec3SGrid>(phi.tree(), phi.transform(), openvdb::Vec3s(0.0f));
+    } else {
+        skeleton = io::leafSkeleton<openvdb::FloatGrid>(phi.tree(), phi.transform(), 0.0f);
+    }
+    static_cast<openvdb::MetaMap&>(*skeleton) = static_cast<const openvdb::MetaMap&>(output);
+    return skeleton;
+}
 
 GradientResult gradient(const GradientOptions& opt)
 {

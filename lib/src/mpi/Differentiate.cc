@@ -176,15 +176,7 @@ DifferentiateResult run(MPI_Comm comm, const Job& job)
                 skeletons.push_back(io::skeletonOf(*grid));
                 continue;
             }
-            openvdb::GridBase::Ptr skeleton;
-            if (outputs[g]->isType<openvdb::Vec3SGrid>()) {
-                skeleton = io::leafSkeleton<openvdb::Vec3SGrid>(grid->tree(), grid->transform(),
-                                                                openvdb::Vec3s(0.0f));
-            } else {
-                skeleton = io::leafSkeleton<openvdb::FloatGrid>(grid->tree(), grid->transform(), 0.0f);
-            }
-            static_cast<openvdb::MetaMap&>(*skeleton) = static_cast<const openvdb::MetaMap&>(*outputs[g]);
-            skeletons.push_back(skeleton);
+            skeletons.push_back(jobs::operatorSkeleton(*outputs[g], *grid));
         }
         std::vector<io::HeadGrid> heads;
         for (std::size_t g = 0; g < outputs.size(); ++g) {

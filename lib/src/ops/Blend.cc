@@ -20,6 +20,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <limits>
 #include <optional>
@@ -182,8 +183,6 @@ public:
         return true;
     }
 
-    openvdb::FloatGrid::Ptr result() const { return mExt; }
-
     /// The extended band with each known voxel's closest point and normal (what the
     /// extension leaves behind, once done).
     GrownBand take() const { return GrownBand{mExt, mCps, mNormals}; }
@@ -244,34 +243,29 @@ private:
                 }
             }
         }
+        // The input's value and state at a voxel of the leaf or a face neighbour.
+        auto sample = [&](const Coord& ijk, float& v) {
+            if (!dense) return acc.probeValue(ijk, v);
+            const Coord l = ijk - origin;
+            const int c = index(l.x(), l.y(), l.z());
+            v = value[c];
+            return on[c];
+        };
         CpLeaf* cp = mCps->probeLeaf(origin);
         CpLeaf* nrm = mNormals->probeLeaf(origin);
-        const int step[3] = {D * D, D, 1};
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const Coord ijk = it.getCoord();
             float v0;
+            sample(ijk, v0);
             openvdb::Vec3d g;
-            if (dense) {
-                const Coord l = ijk - origin;
-                const int c = index(l.x(), l.y(), l.z());
-                v0 = value[c];
-                for (int a = 0; a < 3; ++a) {
-                    const bool p = on[c + step[a]], m = on[c - step[a]];
-                    const float vp = value[c + step[a]], vm = value[c - step[a]];
-                    g[a] = p && m ? 0.5 * (double(vp) - vm) : p ? double(vp) - v0
-                         : m      ? double(v0) - vm           : 0.0;
-                }
-            } else {
-                acc.probeValue(ijk, v0);
-                for (int a = 0; a < 3; ++a) {
-                    Coord dp = ijk, dm = ijk;
-                    dp[a] += 1;
-                    dm[a] -= 1;
-                    float vp, vm;
-                    const bool p = acc.probeValue(dp, vp), m = acc.probeValue(dm, vm);
-                    g[a] = p && m ? 0.5 * (double(vp) - vm) : p ? double(vp) - v0
-                         : m      ? double(v0) - vm           : 0.0;
-                }
+            for (int a = 0; a < 3; ++a) {
+                Coord dp = ijk, dm = ijk;
+                dp[a] += 1;
+                dm[a] -= 1;
+                float vp, vm;
+                const bool p = sample(dp, vp), m = sample(dm, vm);
+                g[a] = p && m ? 0.5 * (double(vp) - vm) : p ? double(vp) - v0
+                     : m      ? double(v0) - vm           : 0.0;
             }
             const double len = g.length();
             const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
@@ -297,9 +291,9 @@ private:
         openvdb::Vec3s cp[kSize], normal[kSize];
     };
 
-    /// Fill @a nb around the leaf at @a origin from the (up to 27) leaves it touches; false if
-    /// a known tile covers some of it (then the voxels are read one by one).
-    static bool gather(const Coord& origin, Readers& r, Neighbourhood& nb)
+    /// Fill @a nb around the leaf at @a origin from the (up to 27) leaves it touches, a leaf's
+    /// buffers at a time (voxel by voxel where a tile stands for a leaf).
+    static void gather(const Coord& origin, Readers& r, Neighbourhood& nb)
     {
         std::fill(std::begin(nb.known), std::end(nb.known), false); // cp, normal: where known
         constexpr int kLast = LeafT::DIM - 1;
@@ -308,13 +302,10 @@ private:
                 for (int dz = -1; dz <= 1; ++dz) {
                     const Coord o = origin.offsetBy(dx * LeafT::DIM, dy * LeafT::DIM, dz * LeafT::DIM);
                     const MaskTree::LeafNodeType* k = r.known.probeConstLeaf(o);
-                    if (!k) {
-                        if (r.known.isValueOn(o)) return false;
-                        continue;
-                    }
                     const CpLeaf* c = r.cp.probeConstLeaf(o);
                     const CpLeaf* nl = r.normal.probeConstLeaf(o);
-                    if (!c || !nl) return false;
+                    const bool leaves = k && c && nl;
+                    if (!leaves && !r.known.isValueOn(o) && !k) continue; // nothing known there
                     // The part of that leaf within the shell: all of it along an axis where it
                     // is the leaf itself, else its last or first slice.
                     const int x0 = dx < 0 ? kLast : 0, x1 = dx > 0 ? 0 : kLast;
@@ -323,21 +314,21 @@ private:
                     for (int x = x0; x <= x1; ++x) {
                         for (int y = y0; y <= y1; ++y) {
                             for (int z = z0; z <= z1; ++z) {
-                                const openvdb::Index m = LeafT::coordToOffset(Coord(x, y, z));
-                                if (!k->isValueOn(m)) continue;
+                                const Coord l(x, y, z);
+                                const openvdb::Index m = LeafT::coordToOffset(l);
+                                if (leaves ? !k->isValueOn(m) : !r.known.isValueOn(o + l)) continue;
                                 const int at = Neighbourhood::index(x + dx * LeafT::DIM,
                                                                     y + dy * LeafT::DIM,
                                                                     z + dz * LeafT::DIM);
                                 nb.known[at] = true;
-                                nb.cp[at] = c->getValue(m);
-                                nb.normal[at] = nl->getValue(m);
+                                nb.cp[at] = leaves ? c->getValue(m) : r.cp.getValue(o + l);
+                                nb.normal[at] = leaves ? nl->getValue(m) : r.normal.getValue(o + l);
                             }
                         }
                     }
                 }
             }
         }
-        return true;
     }
 
     /// Each new voxel y takes the known neighbour (of 26) whose point c is nearest, and the
@@ -347,10 +338,7 @@ private:
                   Readers& r, Neighbourhood& nb) const
     {
         const Coord origin = mask.origin();
-        if (!gather(origin, r, nb)) {
-            growLeafByVoxels(mask, out, outCp, outN, r);
-            return;
-        }
+        gather(origin, r, nb);
         int step[26];
         for (int j = 0; j < 26; ++j) {
             step[j] = Neighbourhood::index(kNeighbours[j].x(), kNeighbours[j].y(), kNeighbours[j].z()) -
@@ -372,42 +360,15 @@ private:
                 const double dist = (y - openvdb::Vec3d(nb.cp[at])).lengthSqr();
                 if (dist < best) best = dist, from = at;
             }
-            if (from == center) { // no known neighbour (a new voxel always has one)
-                growLeafByVoxels(mask, out, outCp, outN, r);
-                return;
-            }
-            const openvdb::Vec3d c(nb.cp[from]), nv(nb.normal[from]);
+            // A new voxel always has a known neighbour; without one, its own (unset) point.
+            const openvdb::Vec3d c(from == center ? r.cp.getValue(ijk) : nb.cp[from]);
+            const openvdb::Vec3d nv(from == center ? r.normal.getValue(ijk) : nb.normal[from]);
             double d = (y - c).dot(nv);
             if (nv.lengthSqr() == 0.0) d = std::sqrt(best); // no normal: the point
             const double sign = (in ? in->getValue(m) : tile) < 0.0f ? -1.0 : 1.0;
             out.setValueOn(m, float(sign * std::abs(d) * mDx));
             outCp.setValueOnly(m, openvdb::Vec3s(c)); // a seed's point
             outN.setValueOnly(m, openvdb::Vec3s(nv));
-        }
-    }
-
-    /// growLeaf() reading each neighbour through the trees' accessors.
-    void growLeafByVoxels(const MaskTree::LeafNodeType& mask, LeafT& out, CpLeaf& outCp,
-                          CpLeaf& outN, Readers& r) const
-    {
-        for (auto it = mask.cbeginValueOn(); it; ++it) {
-            const Coord ijk = it.getCoord();
-            const openvdb::Vec3d y(ijk.x(), ijk.y(), ijk.z());
-            double best = std::numeric_limits<double>::max();
-            Coord from = ijk;
-            for (const Coord& d : kNeighbours) {
-                const Coord n = ijk + d;
-                if (!r.known.isValueOn(n)) continue;
-                const double dist = (y - openvdb::Vec3d(r.cp.getValue(n))).lengthSqr();
-                if (dist < best) best = dist, from = n;
-            }
-            const openvdb::Vec3d c(r.cp.getValue(from)), nv(r.normal.getValue(from));
-            double d = (y - c).dot(nv);
-            if (nv.lengthSqr() == 0.0) d = std::sqrt(best); // no normal: the point
-            const double sign = r.in.getValue(ijk) < 0.0f ? -1.0 : 1.0;
-            out.setValueOn(it.pos(), float(sign * std::abs(d) * mDx));
-            outCp.setValueOnly(it.pos(), openvdb::Vec3s(c)); // a seed's point
-            outN.setValueOnly(it.pos(), openvdb::Vec3s(nv));
         }
     }
 
@@ -626,6 +587,78 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
     return grown;
 }
 
+/// Each input's term at the voxels of one region leaf at a time (seek(), then read()): its
+/// grown band's value where known, else plus or minus @a clamp (the grown half width: beyond the
+/// blend's reach) by the input's sign, clamped to +/- clamp, negated for the inputs a difference
+/// subtracts; and which terms are within their grown bands.
+class LeafTerms
+{
+public:
+    LeafTerms(CsgOp op, const std::vector<openvdb::FloatGrid::Ptr>& grids,
+              const std::vector<GrownBand>& grown, float clamp)
+        : mOp(op), mClamp(clamp), t(grids.size()), reached(grids.size()),
+          mExtLeaf(grids.size()), mOrigLeaf(grids.size()), mOrigTile(grids.size())
+    {
+        for (size_t i = 0; i < grids.size(); ++i) {
+            mExt.emplace_back(grown[i].values->tree());
+            mOrig.emplace_back(grids[i]->tree());
+        }
+    }
+
+    void seek(const Coord& origin)
+    {
+        for (size_t i = 0; i < t.size(); ++i) {
+            mExtLeaf[i] = mExt[i].probeConstLeaf(origin);
+            mOrigLeaf[i] = mOrig[i].probeConstLeaf(origin);
+            mOrigTile[i] = mOrigLeaf[i] ? 0.0f : mOrig[i].getValue(origin);
+        }
+    }
+
+    void read(openvdb::Index m)
+    {
+        for (size_t i = 0; i < t.size(); ++i) {
+            float v;
+            if (mExtLeaf[i] && mExtLeaf[i]->isValueOn(m)) {
+                v = mExtLeaf[i]->getValue(m);
+            } else {
+                const float sv = mOrigLeaf[i] ? mOrigLeaf[i]->getValue(m) : mOrigTile[i];
+                v = sv > 0.0f ? mClamp : -mClamp;
+            }
+            reached[i] = std::abs(v) < mClamp;
+            v = std::max(-mClamp, std::min(mClamp, v));
+            t[i] = (mOp == CsgOp::Difference && i > 0) ? -double(v) : double(v);
+        }
+    }
+
+    /// The reached terms with the least, second and third least @a sign * t (size() for none).
+    std::array<size_t, 3> leading(double sign) const
+    {
+        const size_t n = t.size();
+        std::array<size_t, 3> best{n, n, n};
+        for (size_t i = 0; i < n; ++i) {
+            if (!reached[i]) continue;
+            const double v = sign * t[i];
+            if (best[0] == n || v < sign * t[best[0]]) best = {i, best[0], best[1]};
+            else if (best[1] == n || v < sign * t[best[1]]) best = {best[0], i, best[1]};
+            else if (best[2] == n || v < sign * t[best[2]]) best[2] = i;
+        }
+        return best;
+    }
+
+private:
+    CsgOp mOp;
+    float mClamp;
+
+public:
+    std::vector<double> t;
+    std::vector<char> reached;
+
+private:
+    std::vector<openvdb::tree::ValueAccessor<const FloatTree>> mExt, mOrig;
+    std::vector<const LeafT*> mExtLeaf, mOrigLeaf;
+    std::vector<float> mOrigTile;
+};
+
 /// Step 4, the blended values over @a region, and which of them differ from the sharp value.
 struct BlendedValues
 {
@@ -668,26 +701,14 @@ BlendedValues blendValues(CsgOp op, const BlendPlan& plan, const BlendSettings& 
     const double sign = op == CsgOp::Union ? 1.0 : -1.0;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, in.size()),
                       [&](const tbb::blocked_range<size_t>& r) {
-        std::vector<openvdb::tree::ValueAccessor<const FloatTree>> ext, orig;
-        for (size_t i = 0; i < n; ++i) {
-            ext.emplace_back(grown[i].values->tree());
-            orig.emplace_back(grids[i]->tree());
-        }
-        std::vector<double> t(n);
-        std::vector<char> reached(n);
+        LeafTerms terms(op, grids, grown, clamp);
         for (size_t k = r.begin(); k < r.end(); ++k) {
             LeafT& leaf = *leaves[k];
             MaskTree::LeafNodeType& mark = *marks[k];
+            terms.seek(leaf.origin());
             for (openvdb::Index m = 0; m < LeafT::SIZE; ++m) {
-                const Coord ijk = leaf.offsetToGlobalCoord(m);
-                for (size_t i = 0; i < n; ++i) {
-                    float v;
-                    if (!ext[i].probeValue(ijk, v)) v = orig[i].getValue(ijk) > 0.0f ? clamp : -clamp;
-                    reached[i] = std::abs(v) < clamp;
-                    v = std::max(-clamp, std::min(clamp, v));
-                    t[i] = (op == CsgOp::Difference && i > 0) ? -double(v) : double(v);
-                }
-                const float f = float(plan.kernel.combine(op, t.data(), n));
+                terms.read(m);
+                const float f = float(plan.kernel.combine(op, terms.t.data(), n));
                 if (!in[k]->isValueOn(m)) { // outside the region: its sign only
                     leaf.setValueOff(m, f > 0.0f ? clamp : -clamp);
                     continue;
@@ -695,13 +716,10 @@ BlendedValues blendValues(CsgOp op, const BlendPlan& plan, const BlendSettings& 
                 leaf.setValueOn(m, f);
                 // The lead of the deciding term over the next; a term beyond its grown band is
                 // beyond the blend's reach, however near it looks after clamping.
-                double first = 1e30, second = 1e30;
-                for (size_t i = 0; i < n; ++i) {
-                    const double v = reached[i] ? sign * t[i] : 1e30;
-                    if (v < first) second = first, first = v;
-                    else if (v < second) second = v;
-                }
-                if (second < 1e30 && !implicit::leadKeepsDistance(first, second, lead)) {
+                const auto [first, second, third] = terms.leading(sign);
+                (void)third;
+                if (second != n && !implicit::leadKeepsDistance(sign * terms.t[first],
+                                                                 sign * terms.t[second], lead)) {
                     mark.setValueOn(m); // two terms within reach, the second close enough
                 }
             }
@@ -770,18 +788,14 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
     tbb::parallel_for(tbb::blocked_range<size_t>(0, in.size()),
                       [&](const tbb::blocked_range<size_t>& r) {
         using Vec3Acc = openvdb::tree::ValueAccessor<const openvdb::Vec3STree>;
-        std::vector<openvdb::tree::ValueAccessor<const FloatTree>> ext, orig;
+        LeafTerms terms(op, grids, grown, clamp);
+        std::vector<openvdb::tree::ValueAccessor<const FloatTree>> ext;
         std::vector<Vec3Acc> points, normals;
         for (size_t i = 0; i < n; ++i) {
             ext.emplace_back(grown[i].values->tree());
-            orig.emplace_back(grids[i]->tree());
             points.emplace_back(*grown[i].points);
             normals.emplace_back(*grown[i].normals);
         }
-        std::vector<const LeafT*> extLeaf(n), origLeaf(n);
-        std::vector<float> origTile(n);
-        std::vector<double> u(n);
-        std::vector<char> reached(n);
         // A term's plane in union form, index space: u(z) = m . (z - c).
         struct Plane
         {
@@ -800,35 +814,16 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
             BlendSplice& s = out[k];
             const Coord o = mask.origin();
             for (int a = 0; a < 3; ++a) s.origin[a] = o[a];
-            for (size_t i = 0; i < n; ++i) {
-                extLeaf[i] = ext[i].probeConstLeaf(o);
-                origLeaf[i] = orig[i].probeConstLeaf(o);
-                origTile[i] = origLeaf[i] ? 0.0f : orig[i].getValue(o);
-            }
+            terms.seek(o);
             LeafT::NodeMaskType marked, active;
             for (auto it = mask.cbeginValueOn(); it; ++it) {
                 const openvdb::Index m = it.pos();
-                for (size_t i = 0; i < n; ++i) {
-                    float v;
-                    if (extLeaf[i] && extLeaf[i]->isValueOn(m)) {
-                        v = extLeaf[i]->getValue(m);
-                    } else {
-                        const float sv = origLeaf[i] ? origLeaf[i]->getValue(m) : origTile[i];
-                        v = sv > 0.0f ? clamp : -clamp;
-                    }
-                    reached[i] = std::abs(v) < clamp;
-                    u[i] = termSign(i) * double(v);
-                }
+                terms.read(m);
                 // The deciding term, the next, and a third within reach: blendValues()'s rule.
-                size_t i1 = n, i2 = n, i3 = n;
-                for (size_t i = 0; i < n; ++i) {
-                    if (!reached[i]) continue;
-                    if (i1 == n || u[i] < u[i1]) i3 = i2, i2 = i1, i1 = i;
-                    else if (i2 == n || u[i] < u[i2]) i3 = i2, i2 = i;
-                    else if (i3 == n || u[i] < u[i3]) i3 = i;
-                }
-                if (i2 == n || implicit::leadKeepsDistance(u[i1], u[i2], lead)) continue;
-                if (i3 != n && !implicit::leadKeepsDistance(u[i1], u[i3], lead)) {
+                const auto [i1, i2, i3] = terms.leading(sign);
+                const auto u = [&](size_t i) { return sign * terms.t[i]; };
+                if (i2 == n || implicit::leadKeepsDistance(u(i1), u(i2), lead)) continue;
+                if (i3 != n && !implicit::leadKeepsDistance(u(i1), u(i3), lead)) {
                     failed = true; // three terms: the blend of two planes does not apply
                     return;
                 }
@@ -903,11 +898,12 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
         }
     });
     if (failed) return std::nullopt;
-    std::vector<BlendSplice> kept;
+    size_t kept = 0; // the leaves with a changed voxel, in place
     for (size_t k = 0; k < out.size(); ++k) {
-        if (used[k]) kept.push_back(out[k]);
+        if (used[k]) out[kept++] = out[k];
     }
-    return kept;
+    out.resize(kept);
+    return out;
 }
 
 /// Step 5, distances for the blended voxels: the blend is not a distance (|grad f| < 1 near

@@ -44,6 +44,11 @@ struct GradientResult
 /// any error.
 GradientResult gradient(const GradientOptions& options);
 
+/// @brief The skeleton io::vdbFileHead() takes for @a output, the output of a leaf-by-leaf
+/// operator (gradient, curvature) on @a phi, a float or vec3s grid whose metadata alone is read:
+/// a leaf of @a phi with active voxels as an active tile, and @a output's metadata.
+openvdb::GridBase::Ptr operatorSkeleton(const openvdb::GridBase& output, const openvdb::FloatGrid& phi);
+
 /// @brief Stamp @a grid, the gradient or its magnitude made from grid @a gridName of the file
 /// @a input, with what gradient() writes (ivdb_source and ivdb_step_voxels for the gradient).
 void stampGradient(openvdb::GridBase& grid, const GradientOptions& options,
