@@ -11,11 +11,17 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <sstream>
 
 namespace ivdb::implicit {
 
 namespace {
+
+/// Rows of a batch (children by points), left uninitialized: every entry is written before it
+/// is read, and zeroing them cost as much as a child's values.
+using Rows = std::unique_ptr<double[]>;
+Rows rows(std::size_t count) { return Rows(new double[count]); }
 
 /// A buffer of @a n doubles on the stack for the usual few children, on the heap beyond.
 class Scratch
@@ -50,7 +56,7 @@ inline double superEllipticTerm(double s, double p, double t, double e)
 /// kernel's arithmetic: single points (value(), gradient(), the grid blend) are batches of one,
 /// so every path gives the same bits.
 template<std::size_t MaxPoints>
-inline void superEllipticPoints(CsgOp op, double p, const double* terms, std::size_t m,
+IVDB_CLONE_INLINE void superEllipticPoints(CsgOp op, double p, const double* terms, std::size_t m,
                                 std::size_t n, double* out, double* w)
 {
     // s = -1 for a union (a soft min), +1 for an intersection or difference (a soft max):
@@ -58,6 +64,30 @@ inline void superEllipticPoints(CsgOp op, double p, const double* terms, std::si
     // so every exponent is <= 0 and the largest is exactly 0: no overflow, the sum is >= 1.
     const double s = op == CsgOp::Union ? -1.0 : 1.0;
     double e[MaxPoints], sum[MaxPoints];
+    if (m == 2) {
+        // Two terms, the common case: one exponential, of the other term; the extreme's is
+        // exactly 1 (as is exp(0) for equal terms), so these are the general loop's bits.
+        const double* t1 = terms + n;
+        double x[MaxPoints];
+        for (std::size_t i = 0; i < n; ++i) {
+            const bool firstLeads = s < 0.0 ? terms[i] <= t1[i] : terms[i] >= t1[i];
+            e[i] = firstLeads ? terms[i] : t1[i];
+            const double other = firstLeads ? t1[i] : terms[i];
+            x[i] = detail::expNonPositive(s * p * (other - e[i]));
+            sum[i] = 1.0 + x[i];
+        }
+        if (out) {
+            for (std::size_t i = 0; i < n; ++i) out[i] = e[i] + s * detail::logPositive(sum[i]) / p;
+        }
+        if (w) {
+            for (std::size_t i = 0; i < n; ++i) {
+                const bool firstLeads = e[i] == terms[i];
+                w[i] = (firstLeads ? 1.0 : x[i]) / sum[i];
+                w[n + i] = (firstLeads ? x[i] : 1.0) / sum[i];
+            }
+        }
+        return;
+    }
     for (std::size_t i = 0; i < n; ++i) e[i] = terms[i];
     for (std::size_t c = 1; c < m; ++c) {
         const double* t = terms + c * n;
@@ -253,38 +283,29 @@ Vec3d Blend::gradient(const Vec3d& p) const
     return g;
 }
 
-namespace {
-
-/// A blend's children over a batch as terms (term-major, negated where a difference subtracts
-/// them) and, if @a cg is not null, their gradients (3 rows of n per child).
-void childTerms(const std::vector<Implicit::Ptr>& children, bool difference, const double* x,
-                const double* y, const double* z, std::size_t n, double* terms, double* cg)
+void Blend::childRows(const double* x, const double* y, const double* z, std::size_t n,
+                      double* terms, double* cg) const
 {
-    for (std::size_t c = 0; c < children.size(); ++c) {
+    const bool difference = mOp == Op::Difference;
+    for (std::size_t c = 0; c < mChildren.size(); ++c) {
         double* row = terms + c * n;
-        children[c]->values(x, y, z, row, n);
+        mChildren[c]->values(x, y, z, row, n);
         if (difference && c > 0) {
             for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
         }
         if (cg) {
             double* g = cg + 3 * c * n;
-            children[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
+            mChildren[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
         }
     }
 }
 
-} // namespace
-
-void Blend::gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
-                      double* gz, std::size_t n) const
+void Blend::gradientsFromRows(const double* terms, const double* cg, std::size_t n, double* w,
+                              double* gx, double* gy, double* gz) const
 {
-    // The children's values and gradients in term-major buffers, then as gradient() per point.
     const std::size_t m = mChildren.size();
-    const bool difference = mOp == Op::Difference;
-    std::vector<double> terms(m * n), cg(3 * m * n), w(m * n);
-    childTerms(mChildren, difference, x, y, z, n, terms.data(), cg.data());
     if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
-        superEllipticBatch(mOp, mKernel.p, terms.data(), m, n, nullptr, w.data());
+        superEllipticBatch(mOp, mKernel.p, terms, m, n, nullptr, w);
     } else {
         std::vector<double> t(m), wp(m);
         for (std::size_t i = 0; i < n; ++i) {
@@ -293,7 +314,17 @@ void Blend::gradients(const double* x, const double* y, const double* z, double*
             for (std::size_t c = 0; c < m; ++c) w[c * n + i] = wp[c];
         }
     }
-    weightedGradients(difference, cg.data(), w.data(), m, n, gx, gy, gz);
+    weightedGradients(mOp == Op::Difference, cg, w, m, n, gx, gy, gz);
+}
+
+void Blend::gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                      double* gz, std::size_t n) const
+{
+    // The children's values and gradients in term-major buffers, then as gradient() per point.
+    const std::size_t m = mChildren.size();
+    const Rows terms = rows(m * n), cg = rows(3 * m * n), w = rows(m * n);
+    childRows(x, y, z, n, terms.get(), cg.get());
+    gradientsFromRows(terms.get(), cg.get(), n, w.get(), gx, gy, gz);
 }
 
 void Blend::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
@@ -306,11 +337,10 @@ void Blend::valuesAndGradients(const double* x, const double* y, const double* z
     // values() and gradients() in one pass: the children once, and the exponentials shared by
     // the value and the weights (the same operations in the same order, so the same bits).
     const std::size_t m = mChildren.size();
-    const bool difference = mOp == Op::Difference;
-    std::vector<double> terms(m * n), cg(3 * m * n), w(m * n);
-    childTerms(mChildren, difference, x, y, z, n, terms.data(), cg.data());
-    superEllipticBatch(mOp, mKernel.p, terms.data(), m, n, out, w.data());
-    weightedGradients(difference, cg.data(), w.data(), m, n, gx, gy, gz);
+    const Rows terms = rows(m * n), cg = rows(3 * m * n), w = rows(m * n);
+    childRows(x, y, z, n, terms.get(), cg.get());
+    superEllipticBatch(mOp, mKernel.p, terms.get(), m, n, out, w.get());
+    weightedGradients(mOp == Op::Difference, cg.get(), w.get(), m, n, gx, gy, gz);
 }
 
 void Blend::values(const double* x, const double* y, const double* z, double* out,
@@ -318,10 +348,10 @@ void Blend::values(const double* x, const double* y, const double* z, double* ou
 {
     // Children into a term-major buffer, then combined per point exactly as value() does.
     const std::size_t m = mChildren.size();
-    std::vector<double> terms(m * n);
-    childTerms(mChildren, mOp == Op::Difference, x, y, z, n, terms.data(), nullptr);
+    const Rows terms = rows(m * n);
+    childRows(x, y, z, n, terms.get(), nullptr);
     if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
-        superEllipticBatch(mOp, mKernel.p, terms.data(), m, n, out, nullptr);
+        superEllipticBatch(mOp, mKernel.p, terms.get(), m, n, out, nullptr);
         return;
     }
     std::vector<double> t(m);
@@ -349,10 +379,10 @@ void Blend::intervals(const double* cx, const double* cy, const double* cz, cons
 {
     // interval() per box, the children's in batches and the blend of the bounds in one loop.
     const std::size_t m = mChildren.size();
-    std::vector<double> tlo(m * n), thi(m * n);
+    const Rows tlo = rows(m * n), thi = rows(m * n);
     for (std::size_t c = 0; c < m; ++c) {
-        double* l = tlo.data() + c * n;
-        double* h = thi.data() + c * n;
+        double* l = tlo.get() + c * n;
+        double* h = thi.get() + c * n;
         mChildren[c]->intervals(cx, cy, cz, half, n, l, h);
         if (mOp == Op::Difference && c > 0) {
             for (std::size_t i = 0; i < n; ++i) {
@@ -363,8 +393,8 @@ void Blend::intervals(const double* cx, const double* cy, const double* cz, cons
         }
     }
     if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
-        superEllipticBatch(mOp, mKernel.p, tlo.data(), m, n, lo, nullptr);
-        superEllipticBatch(mOp, mKernel.p, thi.data(), m, n, hi, nullptr);
+        superEllipticBatch(mOp, mKernel.p, tlo.get(), m, n, lo, nullptr);
+        superEllipticBatch(mOp, mKernel.p, thi.get(), m, n, hi, nullptr);
         return;
     }
     std::vector<double> a(m), b(m);

@@ -24,13 +24,25 @@ namespace {
 
 /// The smooth-field iteration (and the crease iteration) repeats its round (a projection onto
 /// the surface along the gradient, then a move towards the foot of the perpendicular; the
-/// tangential error shrinks by about kappa d a round) until the point is on the surface and
-/// the query point on its normal within kConverged of the tolerance, at most kMaxRounds times.
-/// Converging that far, not stopping at the tolerance, keeps the distances a smooth function of
-/// the query point: neighbours that stop after different numbers of rounds differ by far less
-/// than a voxel's second differences can see (curvature stays smooth).
+/// tangential error shrinks by about kappa d a round) until the distance it reports is within
+/// kConverged of the tolerance, at most kMaxRounds times. Converging that far, not stopping at
+/// the tolerance, keeps the distances a smooth function of the query point: neighbours that stop
+/// after different numbers of rounds differ by far less than a voxel's second differences can
+/// see (curvature stays smooth).
 constexpr int kMaxRounds = 12;
 constexpr double kConverged = 1e-4;
+
+/// Whether a smooth-field round's point q has converged (kConverged, as @a converged world
+/// units): on the surface within it (@a off enters the distance at first order), and p's
+/// @a tangential offset from q's normal small enough that the distance |p - q| = @a dist is
+/// within it. On the surface, q a tangential offset t from the foot point, |p - q| exceeds the
+/// distance D by about t^2 / (2 D (1 - kappa D)) (kappa the curvature along t): second order,
+/// so t^2 <= converged D suffices wherever kappa D <= 1/2, a round or more sooner than
+/// t <= converged.
+inline bool roundConverged(double off, double tangential, double dist, double converged)
+{
+    return off <= converged && tangential * tangential <= converged * dist;
+}
 /// A certified distance agrees with the first-order estimate f / |grad f| within this share:
 /// a larger gap means the iteration went to another part of the surface (a medial axis) or
 /// past a singular point, where the local answer cannot be trusted.
@@ -157,10 +169,18 @@ void Implicit::footPoints(const double* x, const double* y, const double* z,
     }
     double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch];
     gradients(x, y, z, gx, gy, gz, n);
+    detail::smoothFootPoints(*this, x, y, z, values, gx, gy, gz, n, query, out);
+}
+
+void detail::smoothFootPoints(const Implicit& f, const double* x, const double* y,
+                              const double* z, const double* values, const double* gx,
+                              const double* gy, const double* gz, std::size_t n,
+                              const FootQuery& query, FootPoints& out)
+{
     // The points that iterate, compacted: index, query point, current point.
     std::size_t idx[kMaxBatch];
     double px[kMaxBatch], py[kMaxBatch], pz[kMaxBatch], qx[kMaxBatch], qy[kMaxBatch],
-        qz[kMaxBatch], f[kMaxBatch], hx[kMaxBatch], hy[kMaxBatch], hz[kMaxBatch];
+        qz[kMaxBatch], fq[kMaxBatch], hx[kMaxBatch], hy[kMaxBatch], hz[kMaxBatch];
     bool near[kMaxBatch];
     firstOrder(x, y, z, values, gx, gy, gz, n, query.far, out, near, qx, qy, qz);
     // The near points compacted, without branches (every point is written, and the next
@@ -178,14 +198,14 @@ void Implicit::footPoints(const double* x, const double* y, const double* z,
     }
     const double converged = kConverged * query.tolerance;
     for (int round = 0; m > 0; ++round) {
-        valuesAndGradients(qx, qy, qz, f, hx, hy, hz, m);
+        f.valuesAndGradients(qx, qy, qz, fq, hx, hy, hz, m);
         RoundState st;
-        smoothRound(px, py, pz, qx, qy, qz, f, hx, hy, hz, m, st);
+        smoothRound(px, py, pz, qx, qy, qz, fq, hx, hy, hz, m, st);
         const bool last = round + 1 == kMaxRounds;
         std::size_t kept = 0;
         for (std::size_t k = 0; k < m; ++k) {
             if (!st.valid[k]) continue; // no gradient: not certified
-            if ((st.off[k] <= converged && st.tangential[k] <= converged) || last) {
+            if (roundConverged(st.off[k], st.tangential[k], st.dist[k], converged) || last) {
                 // Certify q: on the surface, p on its normal, and the distance near the
                 // first-order estimate.
                 const std::size_t i = idx[k];
@@ -227,7 +247,7 @@ bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, doub
         const double hl = std::sqrt(h2);
         const Vec3d r = p - q, nrm = h / hl;
         const double off = std::abs(v) / hl, tangential = (r - nrm * dot(r, nrm)).length();
-        if (off <= kConverged * tol && tangential <= kConverged * tol) return true;
+        if (roundConverged(off, tangential, r.length(), kConverged * tol)) return true;
         if (round + 1 == kMaxRounds) return off <= tol && tangential <= tol;
         q -= h * (v / h2);
         const Vec3d t = p - q;
@@ -379,20 +399,30 @@ public:
     CsgTerms(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
              const double* y, const double* z, std::size_t n, const FootQuery& query)
         : mChildren(children), mOp(op), mX(x), mY(y), mZ(z), mQuery(query),
-          mValues(children.size()), mFeet(children.size())
+          mN(n), mValues(new double[children.size() * n]), mFeet(children.size())
     {
         for (std::size_t c = 0; c < children.size(); ++c) {
             mSphere.push_back(dynamic_cast<const Sphere*>(children[c].get()));
-            children[c]->values(x, y, z, mValues[c].data(), n);
+            children[c]->values(x, y, z, value(c), n);
             if (children[c]->isExactSdf()) continue;
             mFeet[c] = std::make_unique<FootPoints>();
             FootQuery childQuery = query;
             childQuery.feet = true; // the creases start from them
-            children[c]->footPoints(x, y, z, mValues[c].data(), n, childQuery, *mFeet[c]);
+            children[c]->footPoints(x, y, z, value(c), n, childQuery, *mFeet[c]);
         }
     }
 
     std::size_t size() const { return mChildren.size(); }
+    /// Every child is an exact SDF: its distances are its values.
+    bool allExact() const
+    {
+        for (const auto& f : mFeet) {
+            if (f) return false;
+        }
+        return true;
+    }
+    /// The least term distance @a u and the next @a second at every point (allExact()).
+    void firstTwo(std::size_t n, double* u, double* second) const;
     double sign(std::size_t c) const
     {
         return mOp == Csg::Op::Union ? 1.0
@@ -401,7 +431,7 @@ public:
     /// The signed distance of child @a c at point @a i, and whether it is certified (below).
     double distance(std::size_t c, std::size_t i) const
     {
-        return mFeet[c] ? mFeet[c]->distance[i] : mValues[c][i];
+        return mFeet[c] ? mFeet[c]->distance[i] : value(c)[i];
     }
     bool certified(std::size_t c, std::size_t i) const { return !mFeet[c] || mFeet[c]->ok[i]; }
 
@@ -413,9 +443,16 @@ public:
             return mFeet[c]->ok[i];
         }
         const Vec3d p(mX[i], mY[i], mZ[i]);
-        const Vec3d g = mSphere[c] ? (p - mSphere[c]->center()).unitSafe() : mChildren[c]->gradient(p);
+        if (const Sphere* sphere = mSphere[c]) {
+            // The radial projection (none from the centre itself).
+            const Vec3d r = p - sphere->center();
+            const double len = r.length();
+            q = len > 0.0 ? sphere->center() + r * (sphere->radius() / len) : p;
+            return len > 0.0;
+        }
+        const Vec3d g = mChildren[c]->gradient(p);
         const double len = g.length();
-        q = p - g * (len > 0.0 ? mValues[c][i] / len : 0.0);
+        q = p - g * (len > 0.0 ? value(c)[i] / len : 0.0);
         return len > 0.5 && len < 1.5; // an exact SDF's gradient is a unit vector
     }
 
@@ -427,14 +464,33 @@ public:
     bool nearestInside(std::size_t i, double u, double& depth, Vec3d& nearest);
 
 private:
-    /// Outside every term at q, within the tolerance (the terms in @a on excepted).
-    bool outsideOthers(const Vec3d& q, std::initializer_list<std::size_t> on) const
+    /// Outside every term at q, within the tolerance (the terms in @a on excepted), for the
+    /// query point @a p. Only the terms within reach (mNear) are asked when q is within far of
+    /// p: any other term is at least far outside at p, so still outside at q (1-Lipschitz).
+    bool outsideOthers(const Vec3d& p, const Vec3d& q, std::initializer_list<std::size_t> on) const
     {
+        auto outside = [&](std::size_t c) {
+            if (std::find(on.begin(), on.end(), c) != on.end()) return true;
+            if (const Sphere* sphere = mSphere[c]) {
+                // sign (|q - centre| - radius) >= -tolerance, squared (no square root).
+                const double r2 = (q - sphere->center()).lengthSqr();
+                if (sign(c) > 0.0) {
+                    const double least = sphere->radius() - mQuery.tolerance;
+                    return least <= 0.0 || r2 >= least * least;
+                }
+                const double most = sphere->radius() + mQuery.tolerance;
+                return r2 <= most * most;
+            }
+            return sign(c) * mChildren[c]->value(q) >= -mQuery.tolerance;
+        };
+        if ((q - p).lengthSqr() <= mQuery.far * mQuery.far) {
+            for (std::size_t c : mNear) {
+                if (!outside(c)) return false;
+            }
+            return true;
+        }
         for (std::size_t c = 0; c < mChildren.size(); ++c) {
-            if (std::find(on.begin(), on.end(), c) != on.end()) continue;
-            const double v = mSphere[c] ? (q - mSphere[c]->center()).length() - mSphere[c]->radius()
-                                        : mChildren[c]->value(q);
-            if (sign(c) * v < -mQuery.tolerance) return false;
+            if (!outside(c)) return false;
         }
         return true;
     }
@@ -443,11 +499,44 @@ private:
     Csg::Op mOp;
     const double *mX, *mY, *mZ;
     const FootQuery& mQuery;
-    std::vector<std::array<double, kMaxBatch>> mValues;
+    /// Child @a c's values (a row of the batch).
+    double* value(std::size_t c) const { return mValues.get() + c * mN; }
+
+    std::size_t mN;
+    std::unique_ptr<double[]> mValues; // a row of n per child, written before it is read
     std::vector<std::unique_ptr<FootPoints>> mFeet;
     std::vector<const Sphere*> mSphere; // the children that are spheres (closed forms), else null
     std::vector<std::size_t> mNear; // reused across points
 };
+
+/// The least of @a m rows of signed terms s_c v_c (@a rows, @a signs) and the next, at @a n
+/// points: a loop over the points per row, which vectorizes.
+IVDB_VECTOR_CLONES
+void firstTwoRows(const double* const* rows, const double* signs, std::size_t m, std::size_t n,
+                  double* __restrict u, double* __restrict second)
+{
+    for (std::size_t i = 0; i < n; ++i) {
+        u[i] = signs[0] * rows[0][i];
+        second[i] = std::numeric_limits<double>::max();
+    }
+    for (std::size_t c = 1; c < m; ++c) {
+        const double s = signs[c];
+        const double* v = rows[c];
+        for (std::size_t i = 0; i < n; ++i) {
+            const double d = s * v[i];
+            second[i] = std::min(second[i], std::max(u[i], d));
+            u[i] = std::min(u[i], d);
+        }
+    }
+}
+
+void CsgTerms::firstTwo(std::size_t n, double* u, double* second) const
+{
+    std::vector<const double*> rows(size());
+    std::vector<double> signs(size());
+    for (std::size_t c = 0; c < size(); ++c) rows[c] = value(c), signs[c] = sign(c);
+    firstTwoRows(rows.data(), signs.data(), size(), n, u, second);
+}
 
 bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& nearest)
 {
@@ -476,7 +565,7 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     for (std::size_t c : mNear) {
         Vec3d q;
         if (!foot(c, i, q)) complete = false;
-        else if (outsideOthers(q, {c})) offer(q);
+        else if (outsideOthers(p, q, {c})) offer(q);
     }
     auto beyond = [&](std::size_t c) { return std::abs(distance(c, i)) >= best; };
     for (std::size_t a = 0; a < mNear.size() && !beyond(mNear[a]); ++a) {
@@ -491,7 +580,7 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
                 complete = false;
                 continue;
             }
-            if (outsideOthers(q, {ca, cb})) offer(q);
+            if (outsideOthers(p, q, {ca, cb})) offer(q);
             // Where a third surface cuts this crease: a corner (both of three spheres' in
             // closed form, else the one Newton's method finds from q).
             for (std::size_t k = b + 1; k < mNear.size() && !beyond(mNear[k]); ++k) {
@@ -502,10 +591,10 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
                 const int found = sphereCorners({mSphere[ca], mSphere[cb], mSphere[cc]}, corners);
                 if (found >= 0) {
                     for (int c = 0; c < found; ++c) {
-                        if (outsideOthers(corners[c], {ca, cb, cc})) offer(corners[c]);
+                        if (outsideOthers(p, corners[c], {ca, cb, cc})) offer(corners[c]);
                     }
                 } else if (cornerPoint(f, q, mQuery.tolerance, corners[0]) &&
-                           outsideOthers(corners[0], {ca, cb, cc})) {
+                           outsideOthers(p, corners[0], {ca, cb, cc})) {
                     offer(corners[0]);
                 }
             }
@@ -533,33 +622,45 @@ void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const
 {
     CsgTerms terms(children, op, x, y, z, n, query);
     const double rho = op == Csg::Op::Union ? 1.0 : -1.0;
-    for (std::size_t i = 0; i < n; ++i) {
-        // The deciding term (by distance) and the next.
-        std::size_t first = 0;
-        double u = terms.sign(0) * terms.distance(0, i), second = std::numeric_limits<double>::max();
-        bool allOk = terms.certified(0, i);
-        for (std::size_t c = 1; c < terms.size(); ++c) {
-            const double d = terms.sign(c) * terms.distance(c, i);
-            allOk = allOk && terms.certified(c, i);
-            if (d < u) {
-                second = u;
-                u = d;
-                first = c;
-            } else if (d < second) {
-                second = d;
+    // The deciding term (by distance) u, its index and the next, second; whether all are
+    // certified. Exact children without foot points asked: the least two in vectorized passes.
+    double u[kMaxBatch], second[kMaxBatch];
+    std::size_t first[kMaxBatch];
+    bool allOk[kMaxBatch];
+    if (terms.allExact() && !query.feet) {
+        terms.firstTwo(n, u, second);
+        std::fill(allOk, allOk + n, true);
+    } else {
+        for (std::size_t i = 0; i < n; ++i) {
+            first[i] = 0;
+            u[i] = terms.sign(0) * terms.distance(0, i);
+            second[i] = std::numeric_limits<double>::max();
+            allOk[i] = terms.certified(0, i);
+            for (std::size_t c = 1; c < terms.size(); ++c) {
+                const double d = terms.sign(c) * terms.distance(c, i);
+                allOk[i] = allOk[i] && terms.certified(c, i);
+                if (d < u[i]) {
+                    second[i] = u[i];
+                    u[i] = d;
+                    first[i] = c;
+                } else if (d < second[i]) {
+                    second[i] = d;
+                }
             }
         }
+    }
+    for (std::size_t i = 0; i < n; ++i) {
         Vec3d q(x[i], y[i], z[i]);
         // Outside every term, the nearest term's distance is the distance to the union; inside,
         // so is the deciding term's as long as no other term comes within it (its foot point
         // then lies outside the others: they are 1-Lipschitz). Also beyond the range asked for.
-        if (!allOk || leadKeepsDistance(u, second, 0.0) || -u >= query.far) {
-            out.distance[i] = rho * u;
-            out.ok[i] = allOk;
-            if (query.feet && !terms.foot(first, i, q)) out.ok[i] = false;
+        if (!allOk[i] || leadKeepsDistance(u[i], second[i], 0.0) || -u[i] >= query.far) {
+            out.distance[i] = rho * u[i];
+            out.ok[i] = allOk[i];
+            if (query.feet && !terms.foot(first[i], i, q)) out.ok[i] = false;
         } else {
             double depth;
-            out.ok[i] = terms.nearestInside(i, u, depth, q);
+            out.ok[i] = terms.nearestInside(i, u[i], depth, q);
             out.distance[i] = rho * -depth;
         }
         out.x[i] = q[0];
@@ -658,19 +759,29 @@ namespace ivdb::implicit {
 
 void detail::iterateUncertified(const Implicit& f, const double* x, const double* y,
                                 const double* z, const double* values, std::size_t n,
-                                const FootQuery& query, FootPoints& out)
+                                const FootQuery& query, FootPoints& out, const double* gx,
+                                const double* gy, const double* gz)
 {
+    std::size_t all = 0;
+    for (std::size_t i = 0; i < n; ++i) all += out.ok[i] ? 0 : 1;
+    if (all == n && gx) { // every point, in place (no copies)
+        smoothFootPoints(f, x, y, z, values, gx, gy, gz, n, query, out);
+        return;
+    }
     std::size_t idx[kMaxBatch], m = 0;
     double sx[kMaxBatch], sy[kMaxBatch], sz[kMaxBatch], sv[kMaxBatch];
+    double sgx[kMaxBatch], sgy[kMaxBatch], sgz[kMaxBatch];
     for (std::size_t i = 0; i < n; ++i) {
         if (out.ok[i]) continue;
         idx[m] = i;
         sx[m] = x[i], sy[m] = y[i], sz[m] = z[i], sv[m] = values[i];
+        if (gx) sgx[m] = gx[i], sgy[m] = gy[i], sgz[m] = gz[i];
         ++m;
     }
     if (m == 0) return;
     FootPoints sub;
-    f.Implicit::footPoints(sx, sy, sz, sv, m, query, sub);
+    if (!gx) f.gradients(sx, sy, sz, sgx, sgy, sgz, m);
+    smoothFootPoints(f, sx, sy, sz, sv, sgx, sgy, sgz, m, query, sub);
     for (std::size_t k = 0; k < m; ++k) {
         const std::size_t i = idx[k];
         out.distance[i] = sub.distance[k];
@@ -752,37 +863,48 @@ void Blend::footPoints(const double* x, const double* y, const double* z, const 
     auto termSign = [this](std::size_t c) {
         return mOp == Op::Union ? 1.0 : mOp == Op::Intersection ? -1.0 : (c == 0 ? -1.0 : 1.0);
     };
+    // The children's values and gradients once, for the lead rule and for the smooth
+    // iteration's start (the blend's gradient from them).
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
     const double lead = mKernel.reach(query.tolerance) + mKernel.swell(nc);
-    std::vector<std::array<double, kMaxBatch>> childValues(nc);
-    for (std::size_t c = 0; c < nc; ++c) mChildren[c]->values(x, y, z, childValues[c].data(), n);
+    const std::unique_ptr<double[]> terms(new double[nc * n]), cg(new double[3 * nc * n]),
+        w(new double[nc * n]);
+    childRows(x, y, z, n, terms.get(), cg.get());
     std::size_t decider[kMaxBatch];
+    bool anyBlended = false;
     for (std::size_t i = 0; i < n; ++i) {
         double first = std::numeric_limits<double>::max(), second = first;
         for (std::size_t c = 0; c < nc; ++c) {
-            const double u = termSign(c) * childValues[c][i];
+            const double u = rho * terms[c * n + i]; // the child's distance in term form
             if (u < first) second = first, first = u, decider[i] = c;
             else if (u < second) second = u;
         }
         out.ok[i] = leadKeepsDistance(first, second, lead);
+        anyBlended = anyBlended || !out.ok[i];
         out.distance[i] = rho * first;
         out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
     }
     if (query.feet) {
         for (std::size_t i = 0; i < n; ++i) {
             if (!out.ok[i]) continue;
-            const Implicit& c = *mChildren[decider[i]];
-            const Vec3d p(x[i], y[i], z[i]), g = c.gradient(p);
-            const double len = g.length();
+            // The deciding child's own gradient, a unit vector for an exact SDF.
+            const double* g = cg.get() + 3 * decider[i] * n;
+            const Vec3d grad(g[i], g[n + i], g[2 * n + i]);
+            const double len = grad.length();
             if (!(len > 0.5 && len < 1.5)) {
                 out.ok[i] = false;
+                anyBlended = true;
                 continue;
             }
-            const Vec3d q = p - g * (childValues[decider[i]][i] / len);
+            const double value = termSign(decider[i]) * rho * terms[decider[i] * n + i];
+            const Vec3d q = Vec3d(x[i], y[i], z[i]) - grad * (value / len);
             out.x[i] = q[0], out.y[i] = q[1], out.z[i] = q[2];
         }
     }
-    detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+    if (!anyBlended) return;
+    double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch];
+    gradientsFromRows(terms.get(), cg.get(), n, w.get(), gx, gy, gz);
+    detail::iterateUncertified(*this, x, y, z, values, n, query, out, gx, gy, gz);
 }
 
 } // namespace ivdb::implicit

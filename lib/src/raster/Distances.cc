@@ -11,9 +11,9 @@ namespace ivdb::raster::detail {
 
 using implicit::Vec3d;
 
-void trueDistances(const implicit::Implicit& f, const openvdb::Coord* ijk, const double* x,
-                   const double* y, const double* z, const double* values, std::size_t n,
-                   const DistanceSettings& s, double* out, DistanceCounts& counts)
+void trueDistances(const implicit::Implicit& f, const openvdb::Coord& origin, const int* offsets,
+                   const double* x, const double* y, const double* z, const double* values,
+                   std::size_t n, const DistanceSettings& s, double* out, DistanceCounts& counts)
 {
     implicit::FootPoints feet;
     implicit::FootQuery query;
@@ -28,7 +28,9 @@ void trueDistances(const implicit::Implicit& f, const openvdb::Coord* ijk, const
             continue;
         }
         bool certified = false;
-        out[i] = searchDistance(f, ijk[i], values[i], s, certified);
+        const int o = offsets[i];
+        const openvdb::Coord ijk = origin.offsetBy(o >> 6, (o >> 3) & 7, o & 7);
+        out[i] = searchDistance(f, ijk, values[i], s, certified);
         ++(std::isnan(out[i]) ? counts.unknown : certified ? counts.searched : counts.approximate);
     }
 }

@@ -38,13 +38,14 @@ struct DistanceCounts
     }
 };
 
-/// @brief Signed true distances of @a f at the voxels @a ijk (n <= kMaxBatch) whose values are
-/// @a values: the shape's own foot points (Implicit::footPoints) where they are certified, else
-/// the lattice search (searchDistance), NaN where neither knows. A pure function of the points
-/// and the node: the sparse and the dense path get the same numbers.
-void trueDistances(const implicit::Implicit& f, const openvdb::Coord* ijk, const double* x,
-                   const double* y, const double* z, const double* values, std::size_t n,
-                   const DistanceSettings& s, double* out, DistanceCounts& counts);
+/// @brief Signed true distances of @a f at n <= kMaxBatch voxels of the leaf at @a origin (their
+/// leaf offsets @a offsets, their points @a x, @a y, @a z) whose values are @a values: the
+/// shape's own foot points (Implicit::footPoints) where they are certified, else the lattice
+/// search (searchDistance), NaN where neither knows. A pure function of the points and the
+/// node: the sparse and the dense path get the same numbers.
+void trueDistances(const implicit::Implicit& f, const openvdb::Coord& origin, const int* offsets,
+                   const double* x, const double* y, const double* z, const double* values,
+                   std::size_t n, const DistanceSettings& s, double* out, DistanceCounts& counts);
 
 /// @brief The last resort where no local method is certified (a singular point, a medial axis,
 /// a thin feature, a corner of three surfaces): @a f on the voxel lattice around @a ijk (a cube

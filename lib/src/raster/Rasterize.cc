@@ -94,11 +94,12 @@ struct Context
         return BBoxd(w.min() - Vec3d(reach), w.max() + Vec3d(reach));
     }
 
-    /// Can the box hold a voxel of the result? Exact: a band voxel has |f| < band; otherwise a
-    /// band voxel has the surface within the band: a sign change within `reach` of the box.
+    /// Can the box hold a voxel of the result? Exact: a band voxel has |f| < band, and so has
+    /// one of a CSG of exact distances (|f| <= its distance); otherwise a band voxel has the
+    /// surface within the band: a sign change within `reach` of the box.
     Verdict classify(const Implicit& f, const CoordBBox& b) const
     {
-        if (exact) {
+        if (exact || boundedByDistance) {
             const Interval iv = f.interval(worldBox(b));
             const double eps = 1e-6 * dx;
             if (iv.lo >= band + eps) return Verdict::Outside;
@@ -156,26 +157,22 @@ void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, c
                    const double* y, const double* z, double* v, Counts* counts)
 {
     alignas(64) double sx[512], sy[512], sz[512], sv[512], d[512];
-    Coord ijk[512];
     int index[512];
     int m = 0;
-    auto take = [&](int n, int i, int j, int k) {
+    auto take = [&](int n) {
         sx[m] = x[n];
         sy[m] = y[n];
         sz[m] = z[n];
-        ijk[m] = origin.offsetBy(i, j, k);
         index[m++] = n;
     };
     bool inside = false;
     if (ctx.boundedByDistance) {
         f.values(x, y, z, v, 512);
-        for (int i = 0, n = 0; i < 8; ++i)
-            for (int j = 0; j < 8; ++j)
-                for (int k = 0; k < 8; ++k, ++n) {
-                    inside = inside || v[n] < 0.0;
-                    if (std::abs(v[n]) < ctx.band) take(n, i, j, k);
-                    else v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
-                }
+        for (int n = 0; n < 512; ++n) {
+            inside = inside || v[n] < 0.0;
+            if (std::abs(v[n]) < ctx.band) take(n);
+            else v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
+        }
         for (int k = 0; k < m; ++k) sv[k] = v[index[k]];
     } else {
         // The 64 groups' boxes (voxel centres), grown by the band, in one call.
@@ -195,7 +192,7 @@ void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, c
                 const int n = (i << 6) | (j << 3) | k;
                 if (lo[g] > 0.0) v[n] = ctx.band; // no surface within the band
                 else if (hi[g] < 0.0) v[n] = -ctx.band, inside = true;
-                else take(n, i, j, k);
+                else take(n);
             }
         }
         f.values(sx, sy, sz, sv, std::size_t(m));
@@ -204,7 +201,7 @@ void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, c
     if (counts && inside && !counts->anyInside) counts->anyInside = true;
     if (m == 0) return;
     detail::DistanceCounts dc;
-    detail::trueDistances(f, ijk, sx, sy, sz, sv, std::size_t(m), ctx.distances, d, dc);
+    detail::trueDistances(f, origin, index, sx, sy, sz, sv, std::size_t(m), ctx.distances, d, dc);
     if (counts) counts->add(dc);
     for (int k = 0; k < m; ++k) v[index[k]] = d[k];
 }

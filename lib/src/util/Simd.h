@@ -15,3 +15,12 @@
 #else
 #define IVDB_VECTOR_CLONES
 #endif
+
+/// IVDB_CLONE_INLINE, put before a helper that a function with IVDB_VECTOR_CLONES calls: the
+/// helper is always inlined, so each clone compiles it for its own target. A helper the compiler
+/// keeps out of line is built once, for the baseline, and the AVX2 clone only calls it.
+#if defined(__GNUC__) || defined(__clang__)
+#define IVDB_CLONE_INLINE __attribute__((always_inline)) inline
+#else
+#define IVDB_CLONE_INLINE inline
+#endif

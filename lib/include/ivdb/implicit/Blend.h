@@ -112,6 +112,15 @@ public:
 private:
     /// The children's values at @a p as terms (negated where a difference subtracts them).
     void terms(const Vec3d& p, double* t) const;
+    /// The children over a batch of @a n points as terms (term-major: a row of n per child,
+    /// negated where a difference subtracts them) and, if @a cg is not null, their gradients
+    /// (3 rows of n per child).
+    void childRows(const double* x, const double* y, const double* z, std::size_t n,
+                   double* terms, double* cg) const;
+    /// The blend's gradients from childRows()' terms and gradients, with the weights d f / d t
+    /// into @a w (a row of n per child).
+    void gradientsFromRows(const double* terms, const double* cg, std::size_t n, double* w,
+                           double* gx, double* gy, double* gz) const;
 
     Op mOp;
     BlendKernel mKernel;
