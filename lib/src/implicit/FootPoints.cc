@@ -507,6 +507,7 @@ private:
     std::vector<std::unique_ptr<FootPoints>> mFeet;
     std::vector<const Sphere*> mSphere; // the children that are spheres (closed forms), else null
     std::vector<std::size_t> mNear; // reused across points
+    std::vector<Vec3d> mNearFeet;   // their foot points (where found), as mNear
 };
 
 /// The least of @a m rows of signed terms s_c v_c (@a rows, @a signs) and the next, at @a n
@@ -562,8 +563,10 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
         const double d = (p - q).length();
         if (d < best) best = d, nearest = q;
     };
-    for (std::size_t c : mNear) {
-        Vec3d q;
+    mNearFeet.resize(mNear.size());
+    for (std::size_t a = 0; a < mNear.size(); ++a) {
+        const std::size_t c = mNear[a];
+        Vec3d& q = mNearFeet[a];
         if (!foot(c, i, q)) complete = false;
         else if (outsideOthers(p, q, {c})) offer(q);
     }
@@ -571,10 +574,10 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     for (std::size_t a = 0; a < mNear.size() && !beyond(mNear[a]); ++a) {
         for (std::size_t b = a + 1; b < mNear.size() && !beyond(mNear[b]); ++b) {
             const std::size_t ca = mNear[a], cb = mNear[b];
-            Vec3d start, q;
-            foot(ca, i, start);
+            Vec3d q;
             const Crease crease = nearestCreasePoint(*mChildren[ca], *mChildren[cb], mSphere[ca],
-                                                     mSphere[cb], p, start, mQuery.tolerance, q);
+                                                     mSphere[cb], p, mNearFeet[a],
+                                                     mQuery.tolerance, q);
             if (crease == Crease::None) continue; // the two surfaces do not meet
             if (crease == Crease::Failed) {
                 complete = false;
