@@ -6,6 +6,7 @@
 #include <openvdb/Exceptions.h>
 
 #include "../util/Simd.h"
+#include "SphereMath.h"
 
 #include <algorithm>
 #include <cmath>
@@ -45,17 +46,8 @@ void sphereIntervals(const double* __restrict cx, const double* __restrict cy,
     const double l0 = bmin[0], l1 = bmin[1], l2 = bmin[2];
     const double u0 = bmax[0], u1 = bmax[1], u2 = bmax[2];
     for (std::size_t i = 0; i < n; ++i) {
-        const double a0 = l0 - cx[i], b0 = u0 - cx[i];
-        const double a1 = l1 - cy[i], b1 = u1 - cy[i];
-        const double a2 = l2 - cz[i], b2 = u2 - cz[i];
-        const double n0 = a0 > 0.0 ? a0 : (b0 < 0.0 ? b0 : 0.0);
-        const double n1 = a1 > 0.0 ? a1 : (b1 < 0.0 ? b1 : 0.0);
-        const double n2 = a2 > 0.0 ? a2 : (b2 < 0.0 ? b2 : 0.0);
-        const double f0 = std::max(std::abs(a0), std::abs(b0));
-        const double f1 = std::max(std::abs(a1), std::abs(b1));
-        const double f2 = std::max(std::abs(a2), std::abs(b2));
-        lo[i] = std::sqrt(((0.0 + n0 * n0) + n1 * n1) + n2 * n2) - r[i];
-        hi[i] = std::sqrt(((0.0 + f0 * f0) + f1 * f1) + f2 * f2) - r[i];
+        detail::sphereRange(l0 - cx[i], u0 - cx[i], l1 - cy[i], u1 - cy[i], l2 - cz[i],
+                            u2 - cz[i], r[i], lo[i], hi[i]);
     }
 }
 
@@ -148,8 +140,7 @@ void sphereUnionValues(const double* __restrict s, std::size_t m, const double* 
     for (std::size_t c = 0; c < m; ++c) {
         const double cx = s[c], cy = s[m + c], cz = s[2 * m + c], r = s[3 * m + c];
         for (std::size_t i = 0; i < n; ++i) {
-            const double dx = x[i] - cx, dy = y[i] - cy, dz = z[i] - cz;
-            const double v = std::sqrt(dx * dx + dy * dy + dz * dz) - r;
+            const double v = detail::sphereValue(x[i], y[i], z[i], cx, cy, cz, r);
             out[i] = c == 0 ? v : std::min(out[i], v);
         }
     }

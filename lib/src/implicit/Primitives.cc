@@ -3,6 +3,7 @@
 
 #include "../util/Simd.h"
 #include "Checks.h"
+#include "SphereMath.h"
 
 #include <openvdb/Exceptions.h>
 
@@ -20,12 +21,9 @@ namespace {
 
 
 
-// The per-point formulas, shared by value() and values() so both give the same bits.
-inline double sphereValue(double x, double y, double z, double cx, double cy, double cz, double r)
-{
-    const double dx = x - cx, dy = y - cy, dz = z - cz;
-    return std::sqrt(dx * dx + dy * dy + dz * dz) - r;
-}
+// The per-point formulas, shared by value() and values() so both give the same bits (the
+// sphere's in SphereMath.h).
+using detail::sphereValue;
 
 inline double boxValue(double x, double y, double z, const Vec3d& c, const Vec3d& h)
 {
@@ -147,16 +145,11 @@ void Sphere::values(const double* x, const double* y, const double* z, double* o
 
 Interval Sphere::interval(const BBoxd& box) const
 {
-    // Exact range of |p - c| over the box: nearest point (clamped) and farthest corner.
-    double near2 = 0.0, far2 = 0.0;
-    for (int i = 0; i < 3; ++i) {
-        const double lo = box.min()[i] - mCenter[i], hi = box.max()[i] - mCenter[i];
-        const double n = lo > 0.0 ? lo : (hi < 0.0 ? hi : 0.0);
-        const double f = std::max(std::abs(lo), std::abs(hi));
-        near2 += n * n;
-        far2 += f * f;
-    }
-    return {std::sqrt(near2) - mRadius, std::sqrt(far2) - mRadius};
+    Interval iv;
+    detail::sphereRange(box.min()[0] - mCenter[0], box.max()[0] - mCenter[0],
+                        box.min()[1] - mCenter[1], box.max()[1] - mCenter[1],
+                        box.min()[2] - mCenter[2], box.max()[2] - mCenter[2], mRadius, iv.lo, iv.hi);
+    return iv;
 }
 
 IVDB_VECTOR_CLONES
@@ -168,17 +161,9 @@ void Sphere::intervals(const double* cx, const double* cy, const double* cz, con
     const double h0 = half[0], h1 = half[1], h2 = half[2];
     double near[kMaxBatch], far[kMaxBatch];
     for (std::size_t i = 0; i < n; ++i) {
-        const double l0 = (cx[i] - h0) - c0, u0 = (cx[i] + h0) - c0;
-        const double l1 = (cy[i] - h1) - c1, u1 = (cy[i] + h1) - c1;
-        const double l2 = (cz[i] - h2) - c2, u2 = (cz[i] + h2) - c2;
-        const double n0 = l0 > 0.0 ? l0 : (u0 < 0.0 ? u0 : 0.0);
-        const double n1 = l1 > 0.0 ? l1 : (u1 < 0.0 ? u1 : 0.0);
-        const double n2 = l2 > 0.0 ? l2 : (u2 < 0.0 ? u2 : 0.0);
-        const double f0 = std::max(std::abs(l0), std::abs(u0));
-        const double f1 = std::max(std::abs(l1), std::abs(u1));
-        const double f2 = std::max(std::abs(l2), std::abs(u2));
-        near[i] = std::sqrt(((0.0 + n0 * n0) + n1 * n1) + n2 * n2) - r;
-        far[i] = std::sqrt(((0.0 + f0 * f0) + f1 * f1) + f2 * f2) - r;
+        detail::sphereRange((cx[i] - h0) - c0, (cx[i] + h0) - c0, (cy[i] - h1) - c1,
+                            (cy[i] + h1) - c1, (cz[i] - h2) - c2, (cz[i] + h2) - c2, r, near[i],
+                            far[i]);
     }
     std::copy(near, near + n, lo);
     std::copy(far, far + n, hi);
