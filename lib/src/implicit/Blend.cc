@@ -8,6 +8,7 @@
 
 #include "../util/Simd.h"
 #include "FastMath.h"
+#include "Scratch.h"
 
 #include <algorithm>
 #include <cmath>
@@ -23,25 +24,7 @@ namespace {
 using Rows = std::unique_ptr<double[]>;
 Rows rows(std::size_t count) { return Rows(new double[count]); }
 
-/// A buffer of @a n doubles on the stack for the usual few children, on the heap beyond.
-class Scratch
-{
-public:
-    explicit Scratch(std::size_t n): mData(mSmall)
-    {
-        if (n > kSmall) {
-            mBig.resize(n);
-            mData = mBig.data();
-        }
-    }
-    double* data() { return mData; }
-
-private:
-    static constexpr std::size_t kSmall = 64;
-    double mSmall[kSmall];
-    std::vector<double> mBig;
-    double* mData;
-};
+using detail::Scratch;
 
 /// exp(s p (t - e)) for a term t and the extreme term e: exactly 1 for e itself (exp(0)),
 /// without the call.

@@ -6,6 +6,7 @@
 #include <openvdb/Exceptions.h>
 
 #include "../util/Simd.h"
+#include "Scratch.h"
 #include "SphereMath.h"
 
 #include <algorithm>
@@ -50,29 +51,6 @@ void sphereIntervals(const double* __restrict cx, const double* __restrict cy,
                             u2 - cz[i], r[i], lo[i], hi[i]);
     }
 }
-
-/// Two rows of n doubles: on the stack for the usual few children, on the heap beyond.
-class IntervalRows
-{
-public:
-    explicit IntervalRows(std::size_t n): mData(mSmall)
-    {
-        if (n > kSmall) {
-            mBig.resize(2 * n);
-            mData = mBig.data();
-        }
-        mN = n;
-    }
-    double* lo() { return mData; }
-    double* hi() { return mData + mN; }
-
-private:
-    static constexpr std::size_t kSmall = 64;
-    double mSmall[2 * kSmall];
-    std::vector<double> mBig;
-    double* mData;
-    std::size_t mN = 0;
-};
 
 } // namespace
 
@@ -176,9 +154,9 @@ void Csg::values(const double* x, const double* y, const double* z, double* out,
 Interval Csg::interval(const BBoxd& box) const
 {
     const std::size_t n = mChildren.size();
-    IntervalRows rows(n);
-    const double *lo = rows.lo(), *hi = rows.hi();
-    childIntervals(box, rows.lo(), rows.hi());
+    detail::Scratch rows(2 * n);
+    double *lo = rows.data(), *hi = lo + n;
+    childIntervals(box, lo, hi);
     Interval v{lo[0], hi[0]};
     for (std::size_t i = 1; i < n; ++i) {
         const Interval c{lo[i], hi[i]};
@@ -234,22 +212,22 @@ Implicit::Ptr Csg::prune(const BBoxd& box) const
     // Terms whose interval cannot reach the decisive bound anywhere in the box are dropped:
     // for a union, a child whose lowest value lies above another child's highest value.
     const std::size_t n = mChildren.size();
-    IntervalRows rows(n);
-    const double *lo = rows.lo(), *hi = rows.hi();
-    childIntervals(box, rows.lo(), rows.hi());
-    std::vector<Interval> iv(n);
-    for (std::size_t i = 0; i < n; ++i) {
-        iv[i] = Interval{lo[i], hi[i]};
-        if (mOp == Op::Difference && i > 0) iv[i] = -iv[i];
+    detail::Scratch rows(2 * n);
+    double *lo = rows.data(), *hi = lo + n;
+    childIntervals(box, lo, hi);
+    for (std::size_t i = 1; i < n && mOp == Op::Difference; ++i) {
+        const double l = lo[i];
+        lo[i] = -hi[i];
+        hi[i] = -l;
     }
-    double bound = mOp == Op::Union ? iv[0].hi : iv[0].lo;
-    for (const Interval& v : iv) bound = mOp == Op::Union ? std::min(bound, v.hi)
-                                                          : std::max(bound, v.lo);
+    double bound = mOp == Op::Union ? hi[0] : lo[0];
+    for (std::size_t i = 0; i < n; ++i) bound = mOp == Op::Union ? std::min(bound, hi[i])
+                                                                 : std::max(bound, lo[i]);
     std::vector<Ptr> kept;
     kept.reserve(mChildren.size());
     bool changed = false;
     for (std::size_t i = 0; i < mChildren.size(); ++i) {
-        const bool useless = mOp == Op::Union ? iv[i].lo > bound : iv[i].hi < bound;
+        const bool useless = mOp == Op::Union ? lo[i] > bound : hi[i] < bound;
         // A difference keeps its first child: max(-B) alone is not a node type.
         if (useless && !(mOp == Op::Difference && i == 0)) {
             changed = true;
