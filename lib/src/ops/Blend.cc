@@ -23,6 +23,7 @@
 #include <array>
 #include <atomic>
 #include <limits>
+#include <map>
 #include <optional>
 #include <cmath>
 #include <sstream>
@@ -79,44 +80,58 @@ std::vector<Coord> leafOrigins(const MaskTree& mask)
 
 int leavesFor(double voxels) { return int(std::ceil(voxels / kLeafDim)); }
 
+/// A band voxel's surface point c = x - phi(x) n and unit normal n (index space): the plane
+/// the extension passes on.
+struct Seed
+{
+    openvdb::Vec3s point, normal;
+};
+
 /// An input's band grown around the crease: its values (the known voxels active) and, when grown
-/// by closest points, each known voxel's closest surface point and unit normal (index space).
+/// by closest points, each known voxel's seed: the index, in seeds, of the band voxel whose
+/// surface point and normal it took (its own for a band voxel).
 struct GrownBand
 {
     openvdb::FloatGrid::Ptr values;
-    openvdb::Vec3STree::Ptr points, normals; // null when grown by fast sweeping
+    openvdb::Int32Tree::Ptr seedOf;                   // null when grown by fast sweeping
+    std::shared_ptr<const std::vector<Seed>> seeds;
 };
 
 // The voxels of @a grid's band within @a keep (a voxel mask), extended by @a dilation voxels
-// within @a keep by closest-point propagation. Every band voxel x gets its surface point
+// within @a keep by closest-point propagation. Every band voxel x is a seed: its surface point
 // c = x - phi(x) n and normal n = grad(phi)(x) / |grad(phi)(x)| (central differences, one-sided
 // at the band's edge). Then, one layer of voxels at a time, each new voxel y takes the neighbour
-// (of 26) whose point c is nearest, and the distance to that point's tangent plane,
-// (y - c) . n, passing the same point and normal on (they stay the seeds' own). The plane
-// keeps the error second order in the angle between neighbours' normals (the distance to c
-// itself is off by about spacing^2 / (2 distance) on the concave side). The sign comes from the
-// input, which holds it beyond the band. openvdb::tools::dilateSdf (fast sweeping) took about
-// 1.3 us a voxel on this job; this is several times cheaper.
+// (of 26) whose seed's point c is nearest, and the distance to that point's tangent plane,
+// (y - c) . n, passing the same seed on. The plane keeps the error second order in the angle
+// between neighbours' normals (the distance to c itself is off by about spacing^2 /
+// (2 distance) on the concave side). The sign comes from the input, which holds it beyond the
+// band. A voxel holds its seed's index (4 bytes), not a copy of its point and normal (24): the
+// copies' memory, zeroed and written layer by layer, was most of the extension's time.
+// openvdb::tools::dilateSdf (fast sweeping) took about 1.3 us a voxel on this job; this is
+// several times cheaper.
 class ClosestPointExtension
 {
 public:
-    using Vec3fTree = openvdb::Vec3STree;
-    using CpLeaf = Vec3fTree::LeafNodeType;
+    using SeedTree = openvdb::Int32Tree;
+    using SeedLeaf = SeedTree::LeafNodeType;
 
     ClosestPointExtension(const openvdb::FloatGrid& grid, const MaskTree& keep)
         : mGrid(grid), mKeep(keep), mDx(grid.voxelSize()[0]),
           mExt(openvdb::FloatGrid::create(grid.background())),
-          mCps(std::make_shared<Vec3fTree>(openvdb::Vec3s(0.0f))),
-          mNormals(std::make_shared<Vec3fTree>(openvdb::Vec3s(0.0f)))
+          mSeedOf(std::make_shared<SeedTree>(-1)),
+          mSeeds(std::make_shared<std::vector<Seed>>())
     {
         mExt->setTransform(grid.transform().copy());
         mExt->setGridClass(openvdb::GRID_LEVEL_SET);
     }
 
-    /// The band voxels within keep, with their closest points and normals.
+    /// The band voxels within keep, each its own seed.
     void seed()
     {
         openvdb::tree::ValueAccessor<const FloatTree> acc(mGrid.tree());
+        std::vector<LeafT*> leaves;
+        std::vector<SeedLeaf*> seedLeaves;
+        std::vector<size_t> first{0}; // each leaf's first seed
         for (auto it = mKeep.cbeginLeaf(); it; ++it) {
             const LeafT* leaf = acc.probeConstLeaf(it->origin());
             if (!leaf) continue;
@@ -127,35 +142,37 @@ public:
                 continue;
             }
             mExt->tree().addLeaf(copy);
-            mCps->touchLeaf(it->origin());
-            mNormals->touchLeaf(it->origin());
+            leaves.push_back(copy);
+            seedLeaves.push_back(mSeedOf->touchLeaf(it->origin()));
+            seedLeaves.back()->setValueMask(copy->getValueMask());
             mKnown.touchLeaf(it->origin())->setValueMask(copy->getValueMask());
+            first.push_back(first.back() + copy->onVoxelCount());
         }
-        std::vector<LeafT*> leaves;
-        mExt->tree().getNodes(leaves);
+        mSeeds->resize(first.back());
         // Each leaf by one thread; reads of the input only.
         tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
                           [&](const tbb::blocked_range<size_t>& r) {
             openvdb::tree::ValueAccessor<const FloatTree> in(mGrid.tree());
-            for (size_t k = r.begin(); k < r.end(); ++k) seedLeaf(*leaves[k], in);
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                seedLeaf(*leaves[k], in, *seedLeaves[k], first[k]);
+            }
         });
     }
 
     /// One more layer of voxels within keep; false when there is none.
     bool grow()
     {
-        MaskTree next(mFrontier ? *mFrontier : mKnown);
-        openvdb::tools::dilateActiveValues(next, 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                           openvdb::tools::IGNORE_TILES);
-        next.topologyIntersection(mKeep);
-        next.topologyDifference(mKnown);
+        // The unknown voxels of keep next to the last layer (26 neighbours: a box of 1).
+        const MaskTree::Ptr next = levelset::dilatedBox(mFrontier ? *mFrontier : mKnown, 1);
+        next->topologyIntersection(mKeep);
+        next->topologyDifference(mKnown);
         std::vector<const MaskTree::LeafNodeType*> masks;
-        for (auto it = next.cbeginLeaf(); it; ++it) {
+        for (auto it = next->cbeginLeaf(); it; ++it) {
             if (!it->isEmpty()) masks.push_back(it.getLeaf());
         }
         if (masks.empty()) return false;
         std::vector<LeafT*> out(masks.size());
-        std::vector<CpLeaf*> outCp(masks.size()), outN(masks.size());
+        std::vector<SeedLeaf*> outSeed(masks.size());
         openvdb::tree::ValueAccessor<const FloatTree> signAcc(mGrid.tree());
         for (size_t k = 0; k < masks.size(); ++k) {
             const Coord o = masks[k]->origin();
@@ -167,40 +184,40 @@ public:
                 mExt->tree().addLeaf(leaf);
             }
             out[k] = mExt->tree().probeLeaf(o);
-            outCp[k] = mCps->touchLeaf(o);
-            outN[k] = mNormals->touchLeaf(o);
+            outSeed[k] = mSeedOf->touchLeaf(o);
         }
         tbb::parallel_for(tbb::blocked_range<size_t>(0, masks.size()),
                           [&](const tbb::blocked_range<size_t>& r) {
             Readers readers(*this);
             auto nb = std::make_unique<Neighbourhood>();
             for (size_t k = r.begin(); k < r.end(); ++k) {
-                growLeaf(*masks[k], *out[k], *outCp[k], *outN[k], readers, *nb);
+                growLeaf(*masks[k], *out[k], *outSeed[k], readers, *nb);
             }
         });
-        mKnown.topologyUnion(next);
-        mFrontier = std::make_shared<MaskTree>(next);
+        mKnown.topologyUnion(*next);
+        mFrontier = next;
         return true;
     }
 
-    /// The extended band with each known voxel's closest point and normal (what the
-    /// extension leaves behind, once done).
-    GrownBand take() const { return GrownBand{mExt, mCps, mNormals}; }
+    /// The extended band with each known voxel's seed (what the extension leaves behind, once
+    /// done).
+    GrownBand take() const { return GrownBand{mExt, mSeedOf, mSeeds}; }
 
 private:
     /// Each thread's accessors to what a new layer reads.
     struct Readers
     {
         explicit Readers(const ClosestPointExtension& e)
-            : known(e.mKnown), cp(*e.mCps), normal(*e.mNormals), in(e.mGrid.tree()) {}
+            : known(e.mKnown), seedOf(*e.mSeedOf), in(e.mGrid.tree()) {}
         openvdb::tree::ValueAccessor<const MaskTree> known;
-        openvdb::tree::ValueAccessor<const Vec3fTree> cp, normal;
+        openvdb::tree::ValueAccessor<const SeedTree> seedOf;
         openvdb::tree::ValueAccessor<const FloatTree> in;
     };
 
     /// A seed's surface point c = x - phi(x) n and normal n = grad(phi)(x) / |grad(phi)(x)|
     /// (central differences, one-sided at the band's edge), in index space.
-    void seedLeaf(const LeafT& leaf, openvdb::tree::ValueAccessor<const FloatTree>& acc)
+    void seedLeaf(const LeafT& leaf, openvdb::tree::ValueAccessor<const FloatTree>& acc,
+                  SeedLeaf& seedOf, size_t first)
     {
         // The input's values and states at the leaf's voxels and their face neighbours.
         constexpr int D = kLeafDim + 2;
@@ -251,8 +268,8 @@ private:
             v = value[c];
             return on[c];
         };
-        CpLeaf* cp = mCps->probeLeaf(origin);
-        CpLeaf* nrm = mNormals->probeLeaf(origin);
+        std::vector<Seed>& seeds = *mSeeds;
+        size_t next = first;
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const Coord ijk = it.getCoord();
             float v0;
@@ -270,8 +287,8 @@ private:
             const double len = g.length();
             const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
             const openvdb::Vec3d nv = len > 0.0 ? g / len : openvdb::Vec3d(0.0);
-            cp->setValueOnly(it.pos(), openvdb::Vec3s(x - nv * (double(v0) / mDx)));
-            nrm->setValueOnly(it.pos(), openvdb::Vec3s(nv));
+            seeds[next] = Seed{openvdb::Vec3s(x - nv * (double(v0) / mDx)), openvdb::Vec3s(nv)};
+            seedOf.setValueOnly(it.pos(), int(next++));
         }
     }
 
@@ -281,69 +298,69 @@ private:
         {0,-1,-1},{0,-1,0},{0,-1,1},{0,0,-1},{0,0,1},{0,1,-1},{0,1,0},{0,1,1},
         {1,-1,-1},{1,-1,0},{1,-1,1},{1,0,-1},{1,0,0},{1,0,1},{1,1,-1},{1,1,0},{1,1,1}};
 
-    /// A leaf's voxels and the shell of voxels around them, as dense arrays: which are known,
-    /// and their closest points and normals (set where known).
+    /// The seeds of a leaf's voxels and of the shell of voxels around it, as a dense array
+    /// (-1 where not known yet).
     struct Neighbourhood
     {
-        static constexpr int kDim = LeafT::DIM + 2, kSize = kDim * kDim * kDim;
-        static int index(int x, int y, int z) { return ((x + 1) * kDim + (y + 1)) * kDim + (z + 1); }
-        bool known[kSize];
-        openvdb::Vec3s cp[kSize], normal[kSize];
-    };
+        static constexpr int kDim = kLeafDim + 2, kSize = kDim * kDim * kDim;
+        static constexpr int index(int x, int y, int z)
+        {
+            return ((x + 1) * kDim + (y + 1)) * kDim + (z + 1);
+        }
+        int seed[kSize];
 
-    /// Fill @a nb around the leaf at @a origin from the (up to 27) leaves it touches, a leaf's
-    /// buffers at a time (voxel by voxel where a tile stands for a leaf).
-    static void gather(const Coord& origin, Readers& r, Neighbourhood& nb)
-    {
-        std::fill(std::begin(nb.known), std::end(nb.known), false); // cp, normal: where known
-        constexpr int kLast = LeafT::DIM - 1;
-        for (int dx = -1; dx <= 1; ++dx) {
-            for (int dy = -1; dy <= 1; ++dy) {
-                for (int dz = -1; dz <= 1; ++dz) {
-                    const Coord o = origin.offsetBy(dx * LeafT::DIM, dy * LeafT::DIM, dz * LeafT::DIM);
-                    const MaskTree::LeafNodeType* k = r.known.probeConstLeaf(o);
-                    const CpLeaf* c = r.cp.probeConstLeaf(o);
-                    const CpLeaf* nl = r.normal.probeConstLeaf(o);
-                    const bool leaves = k && c && nl;
-                    if (!leaves && !r.known.isValueOn(o) && !k) continue; // nothing known there
-                    // The part of that leaf within the shell: all of it along an axis where it
-                    // is the leaf itself, else its last or first slice.
-                    const int x0 = dx < 0 ? kLast : 0, x1 = dx > 0 ? 0 : kLast;
-                    const int y0 = dy < 0 ? kLast : 0, y1 = dy > 0 ? 0 : kLast;
-                    const int z0 = dz < 0 ? kLast : 0, z1 = dz > 0 ? 0 : kLast;
-                    for (int x = x0; x <= x1; ++x) {
-                        for (int y = y0; y <= y1; ++y) {
-                            for (int z = z0; z <= z1; ++z) {
-                                const Coord l(x, y, z);
-                                const openvdb::Index m = LeafT::coordToOffset(l);
-                                if (leaves ? !k->isValueOn(m) : !r.known.isValueOn(o + l)) continue;
-                                const int at = Neighbourhood::index(x + dx * LeafT::DIM,
-                                                                    y + dy * LeafT::DIM,
-                                                                    z + dz * LeafT::DIM);
-                                nb.known[at] = true;
-                                nb.cp[at] = leaves ? c->getValue(m) : r.cp.getValue(o + l);
-                                nb.normal[at] = leaves ? nl->getValue(m) : r.normal.getValue(o + l);
+        /// Fill from the (up to 27) leaves around the leaf at @a origin, a leaf's slab at a
+        /// time (voxel by voxel where a tile of the known mask stands for a leaf).
+        void gather(const Coord& origin, Readers& r)
+        {
+            std::fill(std::begin(seed), std::end(seed), -1);
+            constexpr int kLast = kLeafDim - 1;
+            for (int dx = -1; dx <= 1; ++dx) {
+                for (int dy = -1; dy <= 1; ++dy) {
+                    for (int dz = -1; dz <= 1; ++dz) {
+                        const Coord o = origin.offsetBy(dx * kLeafDim, dy * kLeafDim, dz * kLeafDim);
+                        const MaskTree::LeafNodeType* k = r.known.probeConstLeaf(o);
+                        const SeedLeaf* s = k ? r.seedOf.probeConstLeaf(o) : nullptr;
+                        if (!k && !r.known.isValueOn(o)) continue; // none known there
+                        // The part of that leaf within the shell: all of it along an axis where
+                        // it is the leaf itself, else its last or first slice.
+                        const int x0 = dx < 0 ? kLast : 0, x1 = dx > 0 ? 0 : kLast;
+                        const int y0 = dy < 0 ? kLast : 0, y1 = dy > 0 ? 0 : kLast;
+                        const int z0 = dz < 0 ? kLast : 0, z1 = dz > 0 ? 0 : kLast;
+                        for (int x = x0; x <= x1; ++x) {
+                            for (int y = y0; y <= y1; ++y) {
+                                for (int z = z0; z <= z1; ++z) {
+                                    const int at = index(x + dx * kLeafDim, y + dy * kLeafDim,
+                                                         z + dz * kLeafDim);
+                                    if (k && s) {
+                                        const openvdb::Index m = SeedLeaf::coordToOffset(Coord(x, y, z));
+                                        if (k->isValueOn(m)) seed[at] = s->getValue(m);
+                                    } else if (r.known.isValueOn(o.offsetBy(x, y, z))) {
+                                        seed[at] = r.seedOf.getValue(o.offsetBy(x, y, z));
+                                    }
+                                }
                             }
                         }
                     }
                 }
             }
         }
-    }
+    };
 
-    /// Each new voxel y takes the known neighbour (of 26) whose point c is nearest, and the
-    /// distance to that point's tangent plane, (y - c) . n, passing the point and normal on.
-    /// The neighbours are read from a dense copy of the leaf's neighbourhood (gather()).
-    void growLeaf(const MaskTree::LeafNodeType& mask, LeafT& out, CpLeaf& outCp, CpLeaf& outN,
-                  Readers& r, Neighbourhood& nb) const
+    /// Each new voxel y takes the known neighbour (of 26) whose seed's point c is nearest, and
+    /// the distance to that point's tangent plane, (y - c) . n, passing the seed on. The
+    /// neighbours are read from a dense copy of the leaf's neighbourhood (gather()).
+    void growLeaf(const MaskTree::LeafNodeType& mask, LeafT& out, SeedLeaf& outSeed, Readers& r,
+                  Neighbourhood& nb) const
     {
         const Coord origin = mask.origin();
-        gather(origin, r, nb);
+        nb.gather(origin, r);
         int step[26];
         for (int j = 0; j < 26; ++j) {
             step[j] = Neighbourhood::index(kNeighbours[j].x(), kNeighbours[j].y(), kNeighbours[j].z()) -
                       Neighbourhood::index(0, 0, 0);
         }
+        const std::vector<Seed>& seeds = *mSeeds;
         const LeafT* in = r.in.probeConstLeaf(origin);
         const float tile = in ? 0.0f : r.in.getValue(origin);
         for (auto it = mask.cbeginValueOn(); it; ++it) {
@@ -353,22 +370,22 @@ private:
             const Coord ijk = origin + local;
             const openvdb::Vec3d y(ijk.x(), ijk.y(), ijk.z());
             double best = std::numeric_limits<double>::max();
-            int from = center;
+            int from = -1, last = -1;
             for (int j = 0; j < 26; ++j) {
-                const int at = center + step[j];
-                if (!nb.known[at]) continue;
-                const double dist = (y - openvdb::Vec3d(nb.cp[at])).lengthSqr();
-                if (dist < best) best = dist, from = at;
+                const int k = nb.seed[center + step[j]];
+                if (k < 0 || k == last) continue; // a seed just weighed gives the same distance
+                last = k;
+                const double dist = (y - openvdb::Vec3d(seeds[size_t(k)].point)).lengthSqr();
+                if (dist < best) best = dist, from = k;
             }
-            // A new voxel always has a known neighbour; without one, its own (unset) point.
-            const openvdb::Vec3d c(from == center ? r.cp.getValue(ijk) : nb.cp[from]);
-            const openvdb::Vec3d nv(from == center ? r.normal.getValue(ijk) : nb.normal[from]);
+            if (from < 0) continue; // a new voxel always has a known neighbour
+            const Seed& seed = seeds[size_t(from)];
+            const openvdb::Vec3d c(seed.point), nv(seed.normal);
             double d = (y - c).dot(nv);
             if (nv.lengthSqr() == 0.0) d = std::sqrt(best); // no normal: the point
             const double sign = (in ? in->getValue(m) : tile) < 0.0f ? -1.0 : 1.0;
             out.setValueOn(m, float(sign * std::abs(d) * mDx));
-            outCp.setValueOnly(m, openvdb::Vec3s(c)); // a seed's point
-            outN.setValueOnly(m, openvdb::Vec3s(nv));
+            outSeed.setValueOn(m, from);
         }
     }
 
@@ -376,8 +393,9 @@ private:
     const MaskTree& mKeep;
     const double mDx;
     openvdb::FloatGrid::Ptr mExt;
-    Vec3fTree::Ptr mCps, mNormals; // each known voxel's closest surface point and normal, index space
-    MaskTree mKnown;          // voxels with a value and a closest point
+    SeedTree::Ptr mSeedOf;    // each known voxel's seed (active where known)
+    std::shared_ptr<std::vector<Seed>> mSeeds;
+    MaskTree mKnown;          // voxels with a value and a seed
     MaskTree::Ptr mFrontier;  // the last layer added (null: the seeds)
 };
 
@@ -568,9 +586,8 @@ MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::Float
 /// Step 3, the grown bands: each input extended by its dilation where the crease reads it, and
 /// its band over the whole @a region (whose re-distancing reads the surface there).
 std::vector<GrownBand> growBands(const BlendPlan& plan,
-                                               const std::vector<openvdb::FloatGrid::Ptr>& grids,
-                                               const MaskTree& crease,
-                                               util::Interrupter* interrupter)
+                                 const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                                 const MaskTree& crease, util::Interrupter* interrupter)
 {
     std::vector<MaskTree::Ptr> keep(plan.n), keepLeaves(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
@@ -582,6 +599,36 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
     std::vector<GrownBand> grown(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
         grown[i] = extendLocally(*grids[i], *keep[i], plan.dilation[i]);
+        util::checkInterrupt(interrupter);
+    }
+    return grown;
+}
+
+/// Step 3 for localBlend(), when every band grows by closest points: each input's band grown
+/// only as far as the crease's voxels read it. A crease voxel at layer L (its 26-connected
+/// distance from the band, at most the dilation d) takes its seed along a path within L of it,
+/// so growing within d voxels of the crease gives every crease voxel the value and seed of the
+/// unbounded extension; one voxel more keeps the planes that the iteration reads just outside
+/// the crease. Null if a band needs fast sweeping.
+std::optional<std::vector<GrownBand>> growBandsForCrease(const BlendPlan& plan,
+                                                         const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                                                         const MaskTree& crease,
+                                                         util::Interrupter* interrupter)
+{
+    for (int d : plan.dilation) {
+        if (d > kMaxClosestPointLayers) return std::nullopt;
+    }
+    std::map<int, MaskTree::Ptr> keep; // by dilation (the inputs' are often the same)
+    std::vector<MaskTree::Ptr> keepLeaves(plan.n);
+    for (size_t i = 0; i < plan.n; ++i) {
+        MaskTree::Ptr& k = keep[plan.dilation[i]];
+        if (!k) k = dilatedCopy(crease, plan.dilation[i] + 1);
+        keepLeaves[i] = leafMask(*k);
+    }
+    plan.checkMemory(keepLeaves);
+    std::vector<GrownBand> grown(plan.n);
+    for (size_t i = 0; i < plan.n; ++i) {
+        grown[i] = extendByClosestPoints(*grids[i], *keep[plan.dilation[i]], plan.dilation[i]);
         util::checkInterrupt(interrupter);
     }
     return grown;
@@ -747,9 +794,12 @@ constexpr double kEnd = 1e-6;
 /// closest-point extension's planes, instead of the blend's values re-distanced by fast
 /// sweeping (docs/method.md#grid-blend).
 ///
-/// Which voxels are blended: blendValues()'s rule. At a blended voxel x the two terms within
-/// reach are, near x, planes: the tangent planes at their closest points, which the extension
-/// holds for every voxel of the grown bands. The distance from x to the blend of two planes is
+/// Which voxels are blended: blendValues()'s rule, which marks only voxels that two grown bands
+/// reach, so only the @a crease's voxels are read. A blended voxel whose blend f has |f| of at
+/// least the background is beyond the band, since f is 1-Lipschitz: only its sign is set (inside)
+/// or the sharp value stays (outside), with no distance to find. At a blended voxel x the two
+/// terms within reach are, near x, planes: the tangent planes at their closest points, which the
+/// extension holds for every voxel of the grown bands. The distance from x to the blend of two planes is
 /// detail::planeBlendDistance(); the point where it is attained, y, has planes of its own
 /// (those of the voxel nearest y), and the distance is taken again with them, until it moves by
 /// under kSettled. The planes' error is second order in the distance from y to where they touch
@@ -765,47 +815,44 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                                                    const BlendSettings& settings,
                                                    const std::vector<openvdb::FloatGrid::Ptr>& grids,
                                                    const std::vector<GrownBand>& grown,
-                                                   const MaskTree& region)
+                                                   const MaskTree& crease)
 {
     const size_t n = plan.n;
     for (const GrownBand& g : grown) {
-        if (!g.points) return std::nullopt;
+        if (!g.seedOf) return std::nullopt;
     }
     const float clamp = float(plan.needVox * plan.dx);
     const double lead = plan.kernel.reach(settings.tolerance * plan.dx) + plan.kernel.swell(n) +
                         plan.dx;
     const detail::UnionKernel kernel = detail::UnionKernel::inUnits(plan.kernel, plan.dx);
     const float bg = plan.bg;
+    const double swell = plan.kernel.swell(n);
     // Union form: an intersection is the union of the complements, a difference subtracts.
     const double sign = op == CsgOp::Union ? 1.0 : -1.0;
     auto termSign = [&](size_t i) { return (op == CsgOp::Difference && i > 0) ? -sign : sign; };
 
     std::vector<const MaskTree::LeafNodeType*> in;
-    for (auto it = region.cbeginLeaf(); it; ++it) in.push_back(it.getLeaf());
+    for (auto it = crease.cbeginLeaf(); it; ++it) in.push_back(it.getLeaf());
     std::vector<BlendSplice> out(in.size());
     std::vector<char> used(in.size(), 0);
     std::atomic<bool> failed{false};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, in.size()),
                       [&](const tbb::blocked_range<size_t>& r) {
-        using Vec3Acc = openvdb::tree::ValueAccessor<const openvdb::Vec3STree>;
         LeafTerms terms(op, grids, grown, clamp);
-        std::vector<openvdb::tree::ValueAccessor<const FloatTree>> ext;
-        std::vector<Vec3Acc> points, normals;
-        for (size_t i = 0; i < n; ++i) {
-            ext.emplace_back(grown[i].values->tree());
-            points.emplace_back(*grown[i].points);
-            normals.emplace_back(*grown[i].normals);
-        }
+        std::vector<openvdb::tree::ValueAccessor<const openvdb::Int32Tree>> seedOf;
+        for (size_t i = 0; i < n; ++i) seedOf.emplace_back(*grown[i].seedOf);
         // A term's plane in union form, index space: u(z) = m . (z - c).
         struct Plane
         {
             openvdb::Vec3d c, m;
         };
         auto planeAt = [&](size_t i, const Coord& ijk, Plane& p) { // false: p unchanged
-            if (!ext[i].isValueOn(ijk)) return false;
-            const openvdb::Vec3d m = termSign(i) * openvdb::Vec3d(normals[i].getValue(ijk));
+            int k;
+            if (!seedOf[i].probeValue(ijk, k)) return false; // not reached
+            const Seed& seed = (*grown[i].seeds)[size_t(k)];
+            const openvdb::Vec3d m = termSign(i) * openvdb::Vec3d(seed.normal);
             if (m.lengthSqr() < 0.25) return false; // no normal
-            p.c = openvdb::Vec3d(points[i].getValue(ijk));
+            p.c = openvdb::Vec3d(seed.point);
             p.m = m;
             return true;
         };
@@ -826,6 +873,20 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                 if (i3 != n && !implicit::leadKeepsDistance(u(i1), u(i3), lead)) {
                     failed = true; // three terms: the blend of two planes does not apply
                     return;
+                }
+                // The blend is 1-Lipschitz (its gradient a convex combination of the terms'), so
+                // |f| is at most the distance to its surface: at |f| >= bg the voxel is beyond the
+                // band, and only its sign (f's) counts. Beyond on the outside the sharp value
+                // (min t >= f) is there too, with the same sign: the voxel is left as it is. The
+                // blend lies within the swell below the least term, which decides most voxels.
+                const double least = u(i1);
+                if (least - swell >= bg) continue;
+                const double f = least <= -bg ? least : sign * plan.kernel.combine(op, terms.t.data(), n);
+                if (f >= bg) continue;
+                if (f <= -bg) {
+                    marked.setOn(m);
+                    s.values[m] = float(-sign) * bg;
+                    continue;
                 }
                 const Coord ijk = it.getCoord();
                 Plane pa, pb;
@@ -976,7 +1037,7 @@ std::vector<BlendSplice> spliceLeaves(const BlendedValues& b, const openvdb::Flo
     return out;
 }
 
-std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& region)
+std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& crease)
 {
     std::ostringstream os;
     if (!hasCrease) {
@@ -986,7 +1047,7 @@ std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& reg
         os << "bands extended to " << plan.needVox << " voxels where the inputs meet, for "
            << plan.kernel.describe() << " (reach "
            << util::formatNumber(std::round(plan.reachVox * 10) / 10) << " voxels; "
-           << util::formatNumber(double(region.activeVoxelCount()))
+           << util::formatNumber(double(crease.activeVoxelCount()))
            << " voxels around the crease checked)";
     }
     return os.str();
@@ -1040,7 +1101,14 @@ struct BlendCrease::Impl
 {
     BlendSettings settings;
     BlendPlan plan;
-    MaskTree::Ptr crease, region;
+    MaskTree::Ptr crease;
+
+    /// The crease's fast-sweeping re-distancing (when the blend of two planes does not apply)
+    /// reads the surface within a band width of it: the region it writes.
+    MaskTree::Ptr region() const
+    {
+        return dilatedCopy(*crease, int(std::ceil(plan.halfWidth)) + 2);
+    }
 };
 
 BlendCrease::BlendCrease(const std::vector<openvdb::FloatGrid::Ptr>& grids,
@@ -1053,8 +1121,6 @@ BlendCrease::BlendCrease(const std::vector<openvdb::FloatGrid::Ptr>& grids,
     m.plan = planBlend(grids, settings);
     m.crease = findCrease(m.plan, grids);
     util::checkInterrupt(settings.interrupter);
-    // The crease's re-distancing reads the surface within a band width of it: the region.
-    m.region = dilatedCopy(*m.crease, int(std::ceil(m.plan.halfWidth)) + 2);
 }
 
 BlendCrease::~BlendCrease() = default;
@@ -1063,7 +1129,7 @@ bool BlendCrease::empty() const { return mImpl->crease->activeVoxelCount() == 0;
 
 std::string BlendCrease::note() const
 {
-    return blendNote(mImpl->plan, !empty(), *mImpl->region);
+    return blendNote(mImpl->plan, !empty(), *mImpl->crease);
 }
 
 std::vector<Coord> BlendCrease::leavesRead(size_t input) const
@@ -1075,7 +1141,8 @@ std::vector<Coord> BlendCrease::leavesRead(size_t input) const
 
 std::vector<Coord> BlendCrease::leavesWritten() const
 {
-    return leafOrigins(*leafMask(*mImpl->region));
+    if (empty()) return {};
+    return leafOrigins(*leafMask(*mImpl->region()));
 }
 
 std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
@@ -1084,9 +1151,14 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
 {
     const Impl& m = *mImpl;
     if (empty()) return {};
+    if (auto grown = growBandsForCrease(m.plan, grids, *m.crease, interrupter)) {
+        auto local = localBlend(op, m.plan, m.settings, grids, *grown, *m.crease);
+        if (local) return *local;
+    }
+    // Where the blend of two planes does not apply: the blend's values over the region, with
+    // every band grown over it, re-distanced.
     const auto grown = growBands(m.plan, grids, *m.crease, interrupter);
-    if (auto local = localBlend(op, m.plan, m.settings, grids, grown, *m.region)) return *local;
-    BlendedValues blended = blendValues(op, m.plan, m.settings, grids, grown, *m.region,
+    BlendedValues blended = blendValues(op, m.plan, m.settings, grids, grown, *m.region(),
                                         finestInput(grids).transform());
     const openvdb::FloatGrid::Ptr redistanced = redistanceBlend(blended, m.plan, interrupter);
     return spliceLeaves(blended, *redistanced, m.plan.bg);
