@@ -470,6 +470,10 @@ struct BlendPlan
     std::vector<int> dilation;           // voxels each input's band must grow
     std::vector<MaskTree::Ptr> leaves;   // each input's leaves, as a coarse mask
 
+    /// How far (voxels) around the crease the fast-sweeping re-distancing reads the surface: a
+    /// band width and two voxels (the region).
+    int regionReach() const { return int(std::ceil(halfWidth)) + 2; }
+
     [[noreturn]] void refuse(double estimate) const
     {
         std::ostringstream os;
@@ -591,8 +595,7 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
 {
     std::vector<MaskTree::Ptr> keep(plan.n), keepLeaves(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
-        keep[i] = dilatedCopy(crease, std::max(plan.dilation[i] + 1,
-                                               int(std::ceil(plan.halfWidth)) + 2));
+        keep[i] = dilatedCopy(crease, std::max(plan.dilation[i] + 1, plan.regionReach()));
         keepLeaves[i] = leafMask(*keep[i]);
     }
     plan.checkMemory(keepLeaves);
@@ -988,7 +991,7 @@ openvdb::FloatGrid::Ptr redistanceBlend(BlendedValues& b, const BlendPlan& plan,
     });
     util::checkInterrupt(interrupter);
     auto samples = b.values->deepCopy();
-    const MaskTree::Ptr around = dilatedCopy(*b.blended, int(std::ceil(plan.halfWidth)) + 2);
+    const MaskTree::Ptr around = dilatedCopy(*b.blended, plan.regionReach());
     openvdb::tree::LeafManager<FloatTree> sampleLeaves(samples->tree());
     sampleLeaves.foreach([&](LeafT& leaf, size_t) {
         const MaskTree::LeafNodeType* m = around->probeConstLeaf(leaf.origin());
@@ -1058,7 +1061,7 @@ std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& cre
 /// or the extension's length beyond for fast sweeping.
 int readReach(const BlendPlan& plan, size_t i)
 {
-    const int keep = std::max(plan.dilation[i] + 1, int(std::ceil(plan.halfWidth)) + 2);
+    const int keep = std::max(plan.dilation[i] + 1, plan.regionReach());
     return keep + plan.dilation[i] + 2;
 }
 
@@ -1107,7 +1110,7 @@ struct BlendCrease::Impl
     /// reads the surface within a band width of it: the region it writes.
     MaskTree::Ptr region() const
     {
-        return dilatedCopy(*crease, int(std::ceil(plan.halfWidth)) + 2);
+        return dilatedCopy(*crease, plan.regionReach());
     }
 };
 
@@ -1151,14 +1154,20 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
 {
     const Impl& m = *mImpl;
     if (empty()) return {};
-    if (auto grown = growBandsForCrease(m.plan, grids, *m.crease, interrupter)) {
-        auto local = localBlend(op, m.plan, m.settings, grids, *grown, *m.crease);
-        if (local) return *local;
+    std::optional<std::vector<GrownBand>> grown =
+        growBandsForCrease(m.plan, grids, *m.crease, interrupter);
+    if (grown) {
+        if (auto local = localBlend(op, m.plan, m.settings, grids, *grown, *m.crease)) return *local;
     }
     // Where the blend of two planes does not apply: the blend's values over the region, with
-    // every band grown over it, re-distanced.
-    const auto grown = growBands(m.plan, grids, *m.crease, interrupter);
-    BlendedValues blended = blendValues(op, m.plan, m.settings, grids, grown, *m.region(),
+    // every band grown over it (the bands just grown, if they reach that far), re-distanced.
+    bool reused = grown.has_value();
+    for (int d : m.plan.dilation) reused = reused && d + 1 >= m.plan.regionReach();
+    if (!reused) {
+        grown.reset();
+        grown = growBands(m.plan, grids, *m.crease, interrupter);
+    }
+    BlendedValues blended = blendValues(op, m.plan, m.settings, grids, *grown, *m.region(),
                                         finestInput(grids).transform());
     const openvdb::FloatGrid::Ptr redistanced = redistanceBlend(blended, m.plan, interrupter);
     return spliceLeaves(blended, *redistanced, m.plan.bg);
