@@ -318,7 +318,8 @@ private:
             for (int dx = -1; dx <= 1; ++dx) {
                 for (int dy = -1; dy <= 1; ++dy) {
                     for (int dz = -1; dz <= 1; ++dz) {
-                        const Coord o = origin.offsetBy(dx * kLeafDim, dy * kLeafDim, dz * kLeafDim);
+                        const Coord o =
+                            origin.offsetBy(dx * kLeafDim, dy * kLeafDim, dz * kLeafDim);
                         const MaskTree::LeafNodeType* k = r.known.probeConstLeaf(o);
                         const SeedLeaf* s = k ? r.seedOf.probeConstLeaf(o) : nullptr;
                         if (!k && !r.known.isValueOn(o)) continue; // none known there
@@ -333,7 +334,8 @@ private:
                                     const int at = index(x + dx * kLeafDim, y + dy * kLeafDim,
                                                          z + dz * kLeafDim);
                                     if (k && s) {
-                                        const openvdb::Index m = SeedLeaf::coordToOffset(Coord(x, y, z));
+                                        const openvdb::Index m =
+                                            SeedLeaf::coordToOffset(Coord(x, y, z));
                                         if (k->isValueOn(m)) seed[at] = s->getValue(m);
                                     } else if (r.known.isValueOn(o.offsetBy(x, y, z))) {
                                         seed[at] = r.seedOf.getValue(o.offsetBy(x, y, z));
@@ -587,51 +589,40 @@ MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::Float
     return pairwise(reach);
 }
 
-/// Step 3, the grown bands: each input extended by its dilation where the crease reads it, and
-/// its band over the whole @a region (whose re-distancing reads the surface there).
-std::vector<GrownBand> growBands(const BlendPlan& plan,
-                                 const std::vector<openvdb::FloatGrid::Ptr>& grids,
-                                 const MaskTree& crease, util::Interrupter* interrupter)
+/// Which voxels read the grown bands: the crease's only (localBlend()), or the whole region
+/// (the fast-sweeping re-distancing, which reads the surface there).
+enum class ReadBy { Crease, Region };
+
+/// How far around the crease input @a i's band grows. A crease voxel at layer L of the
+/// closest-point extension (its 26-connected distance from the band, at most the dilation d)
+/// takes its seed along a path within L of it, so growing within d voxels of the crease gives
+/// every crease voxel the value and seed of the unbounded extension; one voxel more keeps the
+/// planes that localBlend() reads just outside the crease. The region reaches further when the
+/// extension is shorter than a band width.
+int keepReach(const BlendPlan& plan, size_t i, ReadBy readers)
 {
-    std::vector<MaskTree::Ptr> keep(plan.n), keepLeaves(plan.n);
-    for (size_t i = 0; i < plan.n; ++i) {
-        keep[i] = dilatedCopy(crease, std::max(plan.dilation[i] + 1, plan.regionReach()));
-        keepLeaves[i] = leafMask(*keep[i]);
-    }
-    plan.checkMemory(keepLeaves);
-    std::vector<GrownBand> grown(plan.n);
-    for (size_t i = 0; i < plan.n; ++i) {
-        grown[i] = extendLocally(*grids[i], *keep[i], plan.dilation[i]);
-        util::checkInterrupt(interrupter);
-    }
-    return grown;
+    const int crease = plan.dilation[i] + 1;
+    return readers == ReadBy::Crease ? crease : std::max(crease, plan.regionReach());
 }
 
-/// Step 3 for localBlend(), when every band grows by closest points: each input's band grown
-/// only as far as the crease's voxels read it. A crease voxel at layer L (its 26-connected
-/// distance from the band, at most the dilation d) takes its seed along a path within L of it,
-/// so growing within d voxels of the crease gives every crease voxel the value and seed of the
-/// unbounded extension; one voxel more keeps the planes that the iteration reads just outside
-/// the crease. Null if a band needs fast sweeping.
-std::optional<std::vector<GrownBand>> growBandsForCrease(const BlendPlan& plan,
-                                                         const std::vector<openvdb::FloatGrid::Ptr>& grids,
-                                                         const MaskTree& crease,
-                                                         util::Interrupter* interrupter)
+/// Step 3, the grown bands: each input extended by its dilation within keepReach() of the crease.
+std::vector<GrownBand> growBands(const BlendPlan& plan,
+                                 const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                                 const MaskTree& crease, ReadBy readers,
+                                 util::Interrupter* interrupter)
 {
-    for (int d : plan.dilation) {
-        if (d > kMaxClosestPointLayers) return std::nullopt;
-    }
-    std::map<int, MaskTree::Ptr> keep; // by dilation (the inputs' are often the same)
+    std::map<int, MaskTree::Ptr> keep; // by reach (the inputs' are often the same)
     std::vector<MaskTree::Ptr> keepLeaves(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
-        MaskTree::Ptr& k = keep[plan.dilation[i]];
-        if (!k) k = dilatedCopy(crease, plan.dilation[i] + 1);
+        const int reach = keepReach(plan, i, readers);
+        MaskTree::Ptr& k = keep[reach];
+        if (!k) k = dilatedCopy(crease, reach);
         keepLeaves[i] = leafMask(*k);
     }
     plan.checkMemory(keepLeaves);
     std::vector<GrownBand> grown(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
-        grown[i] = extendByClosestPoints(*grids[i], *keep[plan.dilation[i]], plan.dilation[i]);
+        grown[i] = extendLocally(*grids[i], *keep[keepReach(plan, i, readers)], plan.dilation[i]);
         util::checkInterrupt(interrupter);
     }
     return grown;
@@ -802,8 +793,8 @@ constexpr double kEnd = 1e-6;
 /// least the background is beyond the band, since f is 1-Lipschitz: only its sign is set (inside)
 /// or the sharp value stays (outside), with no distance to find. At a blended voxel x the two
 /// terms within reach are, near x, planes: the tangent planes at their closest points, which the
-/// extension holds for every voxel of the grown bands. The distance from x to the blend of two planes is
-/// detail::planeBlendDistance(); the point where it is attained, y, has planes of its own
+/// extension holds for every voxel of the grown bands. The distance from x to the blend of two
+/// planes is detail::planeBlendDistance(); the point where it is attained, y, has planes of its own
 /// (those of the voxel nearest y), and the distance is taken again with them, until it moves by
 /// under kSettled. The planes' error is second order in the distance from y to where they touch
 /// (about 0.5^2 / 2R voxel for a surface of radius R voxels), where fast sweeping's is first
@@ -884,7 +875,8 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                 // blend lies within the swell below the least term, which decides most voxels.
                 const double least = u(i1);
                 if (least - swell >= bg) continue;
-                const double f = least <= -bg ? least : sign * plan.kernel.combine(op, terms.t.data(), n);
+                const double f = least <= -bg
+                    ? least : sign * plan.kernel.combine(op, terms.t.data(), n);
                 if (f >= bg) continue;
                 if (f <= -bg) {
                     marked.setOn(m);
@@ -1061,7 +1053,7 @@ std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& cre
 /// or the extension's length beyond for fast sweeping.
 int readReach(const BlendPlan& plan, size_t i)
 {
-    const int keep = std::max(plan.dilation[i] + 1, plan.regionReach());
+    const int keep = keepReach(plan, i, ReadBy::Region);
     return keep + plan.dilation[i] + 2;
 }
 
@@ -1154,18 +1146,25 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
 {
     const Impl& m = *mImpl;
     if (empty()) return {};
-    std::optional<std::vector<GrownBand>> grown =
-        growBandsForCrease(m.plan, grids, *m.crease, interrupter);
-    if (grown) {
-        if (auto local = localBlend(op, m.plan, m.settings, grids, *grown, *m.crease)) return *local;
+    // The blend of two planes needs every band grown by closest points.
+    const bool closestPoints = std::all_of(m.plan.dilation.begin(), m.plan.dilation.end(),
+                                           [](int d) { return d <= kMaxClosestPointLayers; });
+    std::optional<std::vector<GrownBand>> grown;
+    if (closestPoints) {
+        grown = growBands(m.plan, grids, *m.crease, ReadBy::Crease, interrupter);
+        auto local = localBlend(op, m.plan, m.settings, grids, *grown, *m.crease);
+        if (local) return *local;
     }
-    // Where the blend of two planes does not apply: the blend's values over the region, with
-    // every band grown over it (the bands just grown, if they reach that far), re-distanced.
+    // Where it does not apply: the blend's values over the region, with every band grown over
+    // it (the bands just grown, if they reach that far), re-distanced.
     bool reused = grown.has_value();
-    for (int d : m.plan.dilation) reused = reused && d + 1 >= m.plan.regionReach();
+    for (size_t i = 0; i < m.plan.n; ++i) {
+        reused = reused &&
+                 keepReach(m.plan, i, ReadBy::Crease) == keepReach(m.plan, i, ReadBy::Region);
+    }
     if (!reused) {
         grown.reset();
-        grown = growBands(m.plan, grids, *m.crease, interrupter);
+        grown = growBands(m.plan, grids, *m.crease, ReadBy::Region, interrupter);
     }
     BlendedValues blended = blendValues(op, m.plan, m.settings, grids, *grown, *m.region(),
                                         finestInput(grids).transform());
