@@ -354,6 +354,43 @@ TEST_F(TestBlendGrid, CreaseVoxelsAreTheDistanceToTheBlendedSurface)
     }
 }
 
+// Inputs curved within a few voxels (spheres of radius 10 voxels): the planes of neighbouring
+// voxels differ enough that the nearest point's planes can send the iteration round between
+// voxels. Those voxels take the distance between the cycle's (cycleDistance() in Blend.cc), and
+// the crease keeps its local distances instead of falling back to fast sweeping, which took all
+// of it when one voxel did not settle (worst error then 0.167 and 0.169 voxel here; now 0.045
+// and 0.021).
+TEST_F(TestBlendGrid, CurvedInputsStayLocal)
+{
+    const double dx = 0.06, c = 0.2, radius = 0.6;
+    raster::RasterSettings rs;
+    rs.voxelSize = dx;
+    const auto a = raster::rasterize(std::make_shared<implicit::Sphere>(Vec3d(-c, 0, 0), radius), rs);
+    const auto b = raster::rasterize(std::make_shared<implicit::Sphere>(Vec3d(c, 0, 0), radius), rs);
+    for (const double p : {1.0 / dx, 2.0 / dx}) { // 5- and 3-voxel band extensions
+        ops::BlendSettings s;
+        s.p = p;
+        const auto g = ops::blend(ops::CsgOp::Union, {a, b}, s);
+        const test::BlendOfRevolution exact([&](double u, double v) {
+            return std::min(u, v) - std::log1p(std::exp(-p * std::abs(u - v))) / p;
+        }, c, radius);
+        double worst = 0.0;
+        size_t checked = 0;
+        const double window = 12.0 * dx / std::sqrt(radius * radius - c * c);
+        for (auto it = g->cbeginValueOn(); it; ++it) {
+            const Vec3d q = g->indexToWorld(it.getCoord());
+            if (std::abs(q.x()) > 10.0 * dx) continue;
+            const double d = exact.distance(q.x(), std::hypot(q.y(), q.z()), window);
+            worst = std::max(worst, std::abs(double(*it) - d) / dx);
+            ++checked;
+        }
+        std::printf("grid blend of spheres of radius 10 voxels, p = %g: %zu band voxels near the "
+                    "crease, worst error %.4f voxel\n", p, checked, worst);
+        EXPECT_GT(checked, 5000u) << p;
+        EXPECT_LT(worst, 0.06) << p;
+    }
+}
+
 // The smooth CSG on grids (BlendSettings::k): against its formula on the exact spheres, and
 // against the scene-level smooth node rasterized at the same voxel size.
 TEST_F(TestBlendGrid, SmoothEqualsFormulaAndSceneSmooth)
