@@ -188,11 +188,17 @@ public:
                                      [](const Target& t) { return t.todo.isOff(); }),
                       targets.end());
         if (targets.empty()) return false;
-        // The layer's seeds, kept apart until it is done.
-        const std::unique_ptr<int[]> newSeeds(new int[targets.size() * LeafT::SIZE]);
+        // The layer's seeds, kept apart until it is done: one per voxel to do, in a buffer
+        // reused from layer to layer (fresh pages each layer, zeroed by the kernel, cost more
+        // than the seeds).
+        size_t count = 0;
+        for (const Target& t : targets) count += t.todo.countOn();
+        if (mLayerSeeds.size() < count) mLayerSeeds.resize(count);
         openvdb::tree::ValueAccessor<const FloatTree> signAcc(mGrid.tree());
+        count = 0;
         for (Target& t : targets) {
-            t.seeds = newSeeds.get() + (&t - targets.data()) * LeafT::SIZE;
+            t.seeds = mLayerSeeds.data() + count;
+            count += t.todo.countOn();
             t.known = mKnown.touchLeaf(t.origin);
             t.seed = mSeedOf->touchLeaf(t.origin);
             t.out = mExt->tree().probeLeaf(t.origin);
@@ -215,7 +221,10 @@ public:
                           [&](const tbb::blocked_range<size_t>& r) {
             for (size_t k = r.begin(); k < r.end(); ++k) {
                 const Target& t = targets[k];
-                for (auto it = t.added.beginOn(); it; ++it) t.seed->setValueOn(it.pos(), t.seeds[it.pos()]);
+                const int* seed = t.seeds;
+                for (auto it = t.todo.beginOn(); it; ++it, ++seed) {
+                    if (*seed >= 0) t.seed->setValueOn(it.pos(), *seed);
+                }
                 t.known->getValueMask() |= t.added;
             }
         });
@@ -237,7 +246,7 @@ private:
     {
         Coord origin;
         MaskBits todo, added; // added: todo's voxels given a value (all of them)
-        int* seeds = nullptr; // LeafT::SIZE entries, read at the added voxels: their seeds
+        int* seeds = nullptr; // each todo voxel's seed, in order (-1: none)
         MaskTree::LeafNodeType* known = nullptr;
         SeedLeaf* seed = nullptr;
         LeafT* out = nullptr;
@@ -468,8 +477,11 @@ private:
         const std::vector<Seed>& seeds = *mSeeds;
         const LeafT* in = r.in.probeConstLeaf(origin);
         const float tile = in ? 0.0f : r.in.getValue(origin);
+        int* out = t.seeds;
         for (auto it = t.todo.beginOn(); it; ++it) {
             const openvdb::Index m = it.pos();
+            int& seedOut = *out++;
+            seedOut = -1;
             const Coord local = LeafT::offsetToLocalCoord(m);
             const int center = Neighbourhood::index(local.x(), local.y(), local.z());
             const Coord ijk = origin + local;
@@ -491,7 +503,7 @@ private:
             const double sign = (in ? in->getValue(m) : tile) < 0.0f ? -1.0 : 1.0;
             t.out->setValueOn(m, float(sign * std::abs(d) * mDx));
             t.added.setOn(m);
-            t.seeds[m] = from;
+            seedOut = from;
         }
     }
 
@@ -503,6 +515,7 @@ private:
     std::shared_ptr<std::vector<Seed>> mSeeds;
     MaskTree mKnown;           // voxels with a value and a seed (leaves only, no tiles)
     MaskTree::Ptr mNear;       // the leaves next to the last layer (or the seeds), coarse
+    std::vector<int> mLayerSeeds; // the layer's seeds until it is done (Target::seeds)
 };
 
 GrownBand extendByClosestPoints(const openvdb::FloatGrid& grid, const MaskTree& keep, int dilation)
