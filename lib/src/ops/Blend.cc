@@ -977,8 +977,9 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
 
     std::vector<const MaskTree::LeafNodeType*> in;
     for (auto it = crease.cbeginLeaf(); it; ++it) in.push_back(it.getLeaf());
-    std::vector<BlendSplice> out(in.size());
-    std::vector<char> used(in.size(), 0);
+    // The leaves with a changed voxel (most crease leaves have none: a splice for each would be
+    // tens of MB of fresh pages at radius 400).
+    std::vector<std::unique_ptr<BlendSplice>> changed(in.size());
     std::atomic<bool> failed{false};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, in.size()),
                       [&](const tbb::blocked_range<size_t>& r) {
@@ -1000,9 +1001,10 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
             p.m = m;
             return true;
         };
+        BlendSplice s;
         for (size_t k = r.begin(); k < r.end() && !failed; ++k) {
             const MaskTree::LeafNodeType& mask = *in[k];
-            BlendSplice& s = out[k];
+            s = BlendSplice{};
             const Coord o = mask.origin();
             for (int a = 0; a < 3; ++a) s.origin[a] = o[a];
             terms.seek(o);
@@ -1022,11 +1024,12 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                 // |f| is at most the distance to its surface: at |f| >= bg the voxel is beyond the
                 // band, and only its sign (f's) counts. Beyond on the outside the sharp value
                 // (min t >= f) is there too, with the same sign: the voxel is left as it is. The
-                // blend lies within the swell below the least term, which decides most voxels.
+                // blend lies within the swell below the least term, which decides most voxels;
+                // where that term is at -bg or below (beyond its band: the sharp value is the
+                // inside background already), so is the blend.
                 const double least = u(i1);
-                if (least - swell >= bg) continue;
-                const double f = least <= -bg
-                    ? least : sign * plan.kernel.combine(op, terms.t.data(), n);
+                if (least - swell >= bg || least <= -bg) continue;
+                const double f = sign * plan.kernel.combine(op, terms.t.data(), n);
                 if (f >= bg) continue;
                 if (f <= -bg) {
                     marked.setOn(m);
@@ -1101,19 +1104,19 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                     s.values[m] = value > 0.0f ? bg : -bg;
                 }
             }
-            used[k] = !marked.isOff();
+            if (marked.isOff()) continue;
             for (int w = 0; w < BlendSplice::kWords; ++w) {
                 s.marked[w] = marked.getWord<std::uint64_t>(openvdb::Index(w));
                 s.active[w] = active.getWord<std::uint64_t>(openvdb::Index(w));
             }
+            changed[k] = std::make_unique<BlendSplice>(s);
         }
     });
     if (failed) return std::nullopt;
-    size_t kept = 0; // the leaves with a changed voxel, in place
-    for (size_t k = 0; k < out.size(); ++k) {
-        if (used[k]) out[kept++] = out[k];
+    std::vector<BlendSplice> out;
+    for (const auto& c : changed) {
+        if (c) out.push_back(*c);
     }
-    out.resize(kept);
     return out;
 }
 
