@@ -41,12 +41,50 @@ constexpr int kLeafLog2 = LeafT::LOG2DIM;
 constexpr int kLeafDim = LeafT::DIM;
 
 // Leaf nodes as the voxels of a coarse mask: voxel v stands for the leaf at origin v * 8. The
-// blend's regions are decided on this mask, which is 512 times smaller than the band.
+// blend's regions are decided on this mask, which is 512 times smaller than the band. Read from
+// the child masks of the nodes above the leaves (16^3 children each, bit (x << 8) | (y << 4) | z),
+// eight rows of eight bits at a time, instead of a voxel set per leaf.
 template<typename TreeT>
 MaskTree::Ptr leafMask(const TreeT& tree)
 {
+    using Parent = typename TreeT::RootNodeType::ChildNodeType::ChildNodeType;
+    static_assert(Parent::LOG2DIM == 4 && kLeafDim == 8, "16^3 leaves under a node, 8^3 in a mask leaf");
+    std::vector<const Parent*> parents;
+    tree.getNodes(parents);
     auto mask = std::make_shared<MaskTree>();
-    for (auto it = tree.cbeginLeaf(); it; ++it) mask->setValueOn(it->origin() >> kLeafLog2);
+    openvdb::tree::ValueAccessor<MaskTree> acc(*mask);
+    for (const Parent* node : parents) {
+        const Coord base = node->origin() >> kLeafLog2; // in leaves: a multiple of 16
+        const auto& children = node->getChildMask();
+        // The node's 16^3 children are 2^3 leaves of the coarse mask.
+        for (int a = 0; a < 2; ++a) {
+            for (int b = 0; b < 2; ++b) {
+                for (int c = 0; c < 2; ++c) {
+                    std::uint64_t words[kLeafDim];
+                    std::uint64_t any = 0;
+                    for (int xl = 0; xl < kLeafDim; ++xl) {
+                        const int x = kLeafDim * a + xl;
+                        std::uint64_t w = 0;
+                        for (int yl = 0; yl < kLeafDim; ++yl) {
+                            const int y = kLeafDim * b + yl;
+                            // Word x * 4 + y / 4 holds four rows of 16 bits (z) at x, y.
+                            const auto row = children.template getWord<std::uint64_t>(
+                                openvdb::Index(x * 4 + (y >> 2)));
+                            w |= ((row >> ((y & 3) * 16 + kLeafDim * c)) & 0xFFu) << (kLeafDim * yl);
+                        }
+                        words[xl] = w;
+                        any |= w;
+                    }
+                    if (!any) continue;
+                    auto& bits = acc.touchLeaf(base.offsetBy(kLeafDim * a, kLeafDim * b,
+                                                             kLeafDim * c))->getValueMask();
+                    for (int x = 0; x < kLeafDim; ++x) {
+                        bits.template getWord<std::uint64_t>(openvdb::Index(x)) |= words[x];
+                    }
+                }
+            }
+        }
+    }
     return mask;
 }
 
