@@ -723,12 +723,13 @@ MaskTree::Ptr pairwise(const std::vector<MaskTree::Ptr>& masks)
 /// input's band within reach of a leaf of another's), then in voxels within those leaves.
 MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids)
 {
+    // Each input's masks by one thread: a dilation is serial, and the inputs are independent.
     std::vector<MaskTree::Ptr> reach(plan.n);
-    for (size_t i = 0; i < plan.n; ++i) {
+    tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
         reach[i] = dilatedCopy(*plan.leaves[i], leavesFor(plan.dilation[i]));
-    }
+    });
     const MaskTree::Ptr candidates = pairwise(reach);
-    for (size_t i = 0; i < plan.n; ++i) {
+    tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
         // The band's voxels in the leaves that can reach a candidate, grown by the extension.
         auto band = std::make_shared<MaskTree>();
         openvdb::tree::ValueAccessor<const FloatTree> acc(grids[i]->tree());
@@ -740,7 +741,7 @@ MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::Float
         }
         dilateLeaves(*band, plan.dilation[i]);
         reach[i] = band;
-    }
+    });
     return pairwise(reach);
 }
 
@@ -777,20 +778,23 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
                                  const MaskTree& crease, ReadBy readers,
                                  util::Interrupter* interrupter)
 {
-    std::map<int, MaskTree::Ptr> keep; // by reach (the inputs' are often the same)
-    std::vector<MaskTree::Ptr> keepLeaves(plan.n);
+    std::map<int, MaskTree::Ptr> byReach; // the inputs' reaches are often the same
+    std::vector<MaskTree::Ptr> keep(plan.n), keepLeaves(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
         const int reach = keepReach(plan, i, readers);
-        MaskTree::Ptr& k = keep[reach];
+        MaskTree::Ptr& k = byReach[reach];
         if (!k) k = dilatedCopy(crease, reach);
+        keep[i] = k;
         keepLeaves[i] = leafMask(*k);
     }
     plan.checkMemory(keepLeaves);
+    // The inputs side by side: each extension's own loops are parallel, but between them are
+    // serial steps (a layer's leaves, the dilations), which the other input's work fills.
     std::vector<GrownBand> grown(plan.n);
-    for (size_t i = 0; i < plan.n; ++i) {
-        grown[i] = extendLocally(*grids[i], *keep[keepReach(plan, i, readers)], plan.dilation[i]);
-        util::checkInterrupt(interrupter);
-    }
+    tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
+        grown[i] = extendLocally(*grids[i], *keep[i], plan.dilation[i]);
+    });
+    util::checkInterrupt(interrupter);
     return grown;
 }
 
