@@ -1032,6 +1032,7 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
         struct Plane
         {
             openvdb::Vec3d c, m;
+            int seed = -1; // the seed it comes from
         };
         auto planeAt = [&](size_t i, const Coord& ijk, Plane& p) { // false: p unchanged
             int k;
@@ -1041,6 +1042,7 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
             if (m.lengthSqr() < 0.25) return false; // no normal
             p.c = openvdb::Vec3d(seed.point);
             p.m = m;
+            p.seed = k;
             return true;
         };
         BlendSplice s;
@@ -1119,10 +1121,14 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                         failed = true;
                         return;
                     }
-                    // The planes of the voxel nearest y (the old ones where it has none).
+                    // The planes of the voxel nearest y (the old ones where it has none); the
+                    // same planes again (often: a seed passes along its normal) give the same
+                    // distance.
                     const Coord at = openvdb::Coord::round(x - (phi / len) * g);
-                    const bool newA = planeAt(i1, at, pa), newB = planeAt(i2, at, pb);
-                    if (!newA && !newB) settled = true;
+                    const int seedA = pa.seed, seedB = pb.seed;
+                    planeAt(i1, at, pa);
+                    planeAt(i2, at, pb);
+                    if (pa.seed == seedA && pb.seed == seedB) settled = true;
                 }
                 // Near the middle of a valley the nearest point may be on either term's side,
                 // each side's planes sending y to the other: then one term weighs all at either
