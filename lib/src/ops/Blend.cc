@@ -487,10 +487,10 @@ private:
                         const int z0 = dz < 0 ? kLast : 0, z1 = dz > 0 ? 0 : kLast;
                         for (int x = x0; x <= x1; ++x) {
                             for (int y = y0; y <= y1; ++y) {
-                                const int* row = from + SeedLeaf::coordToOffset(Coord(x, y, 0));
+                                const int* row = from + SeedLeaf::coordToOffset(Coord(x, y, z0));
                                 int* to = seed + index(x + dx * kLeafDim, y + dy * kLeafDim,
-                                                       dz * kLeafDim);
-                                for (int z = z0; z <= z1; ++z) to[z] = row[z];
+                                                       z0 + dz * kLeafDim);
+                                for (int z = 0; z <= z1 - z0; ++z) to[z] = row[z];
                             }
                         }
                     }
