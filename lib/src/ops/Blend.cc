@@ -48,7 +48,8 @@ template<typename TreeT>
 MaskTree::Ptr leafMask(const TreeT& tree)
 {
     using Parent = typename TreeT::RootNodeType::ChildNodeType::ChildNodeType;
-    static_assert(Parent::LOG2DIM == 4 && kLeafDim == 8, "16^3 leaves under a node, 8^3 in a mask leaf");
+    static_assert(Parent::LOG2DIM == 4 && kLeafDim == 8,
+                  "16^3 leaves under a node, 8^3 in a mask leaf");
     std::vector<const Parent*> parents;
     tree.getNodes(parents);
     auto mask = std::make_shared<MaskTree>();
@@ -70,7 +71,8 @@ MaskTree::Ptr leafMask(const TreeT& tree)
                             // Word x * 4 + y / 4 holds four rows of 16 bits (z) at x, y.
                             const auto row = children.template getWord<std::uint64_t>(
                                 openvdb::Index(x * 4 + (y >> 2)));
-                            w |= ((row >> ((y & 3) * 16 + kLeafDim * c)) & 0xFFu) << (kLeafDim * yl);
+                            w |= ((row >> ((y & 3) * 16 + kLeafDim * c)) & 0xFFu)
+                                 << (kLeafDim * yl);
                         }
                         words[xl] = w;
                         any |= w;
@@ -309,7 +311,8 @@ private:
         // The row of 8 bits (z) of a leaf at local x, y; none without a leaf.
         auto row = [](const MaskTree::LeafNodeType* leaf, int x, int y) -> unsigned {
             if (!leaf) return 0u;
-            const auto word = leaf->getValueMask().template getWord<std::uint64_t>(openvdb::Index(x));
+            const auto word =
+                leaf->getValueMask().template getWord<std::uint64_t>(openvdb::Index(x));
             return unsigned(word >> (kLeafDim * y)) & 0xFFu;
         };
         std::uint16_t rows[D][D];
