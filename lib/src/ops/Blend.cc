@@ -12,7 +12,6 @@
 #include "../levelset/Sweeping.h"
 #include "BlendDistance.h"
 
-#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/LeafManager.h>
@@ -22,11 +21,14 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cstdint>
 #include <limits>
 #include <map>
+#include <memory>
 #include <optional>
 #include <cmath>
 #include <sstream>
+#include <vector>
 
 namespace ivdb::ops {
 
@@ -205,9 +207,8 @@ public:
     bool grow()
     {
         // The layer's voxels, leaf by leaf in parallel, from the known voxels' masks (no tree is
-        // dilated: that serial work took a third of each layer): in the leaves of keep next to
-        // (26 neighbours) a leaf that gained voxels in the last layer, keep's voxels not known
-        // yet that have a known neighbour.
+        // dilated: that serial work took a third of each layer): in the leaves the last layer
+        // can reach (mNear, markNear()), keep's voxels not known yet that have a known neighbour.
         std::vector<Target> targets;
         for (const Coord& o : leafOrigins(*mNear)) targets.push_back(Target{o, {}, {}});
         tbb::parallel_for(tbb::blocked_range<size_t>(0, targets.size()),
@@ -1403,7 +1404,7 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
         if (local) return *local;
     }
     // Where it does not apply: the blend's values over the region, with every band grown over
-    // it, re-distanced.
+    // it, re-distanced (the bands grown for the crease freed first).
     grown.reset();
     grown = growBands(m.plan, grids, *m.crease, ReadBy::Region, interrupter);
     BlendedValues blended = blendValues(op, m.plan, m.settings, grids, *grown, *m.region(),
