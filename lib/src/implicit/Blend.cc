@@ -19,11 +19,6 @@ namespace ivdb::implicit {
 
 namespace {
 
-/// Rows of a batch (children by points), left uninitialized: every entry is written before it
-/// is read, and zeroing them cost as much as a child's values.
-using Rows = std::unique_ptr<double[]>;
-Rows rows(std::size_t count) { return Rows(new double[count]); }
-
 using detail::Scratch;
 
 /// exp(s p (t - e)) for a term t and the extreme term e: exactly 1 for e itself (exp(0)),
@@ -45,7 +40,7 @@ IVDB_CLONE_INLINE void superEllipticPoints(CsgOp op, double p, const double* ter
     // s = -1 for a union (a soft min), +1 for an intersection or difference (a soft max):
     // f = s (1/p) ln sum exp(s p t_i) = e + s (1/p) ln sum exp(s p (t_i - e)), e the extreme term,
     // so every exponent is <= 0 and the largest is exactly 0: no overflow, the sum is >= 1.
-    const double s = op == CsgOp::Union ? -1.0 : 1.0;
+    const double s = op == CsgOp::Union ? -1.0 : 1.0, invP = 1.0 / p;
     double e[MaxPoints], sum[MaxPoints];
     if (m == 2) {
         // Two terms, the common case: one exponential, of the other term; the extreme's is
@@ -60,13 +55,14 @@ IVDB_CLONE_INLINE void superEllipticPoints(CsgOp op, double p, const double* ter
             sum[i] = 1.0 + x[i];
         }
         if (out) {
-            for (std::size_t i = 0; i < n; ++i) out[i] = e[i] + s * detail::logPositive(sum[i]) / p;
+            for (std::size_t i = 0; i < n; ++i) out[i] = e[i] + s * detail::logPositive(sum[i]) * invP;
         }
         if (w) {
             for (std::size_t i = 0; i < n; ++i) {
                 const bool firstLeads = e[i] == terms[i];
-                w[i] = (firstLeads ? 1.0 : x[i]) / sum[i];
-                w[n + i] = (firstLeads ? x[i] : 1.0) / sum[i];
+                const double inv = 1.0 / sum[i];
+                w[i] = firstLeads ? inv : x[i] * inv;
+                w[n + i] = firstLeads ? x[i] * inv : inv;
             }
         }
         return;
@@ -94,12 +90,14 @@ IVDB_CLONE_INLINE void superEllipticPoints(CsgOp op, double p, const double* ter
         }
     }
     if (out) {
-        for (std::size_t i = 0; i < n; ++i) out[i] = e[i] + s * detail::logPositive(sum[i]) / p;
+        for (std::size_t i = 0; i < n; ++i) out[i] = e[i] + s * detail::logPositive(sum[i]) * invP;
     }
     if (w) {
+        double inv[MaxPoints];
+        for (std::size_t i = 0; i < n; ++i) inv[i] = 1.0 / sum[i];
         for (std::size_t c = 0; c < m; ++c) {
             double* wc = w + c * n;
-            for (std::size_t i = 0; i < n; ++i) wc[i] /= sum[i];
+            for (std::size_t i = 0; i < n; ++i) wc[i] *= inv[i];
         }
     }
 }
@@ -272,24 +270,25 @@ void Blend::childRows(const double* x, const double* y, const double* z, std::si
     const bool difference = mOp == Op::Difference;
     for (std::size_t c = 0; c < mChildren.size(); ++c) {
         double* row = terms + c * n;
-        mChildren[c]->values(x, y, z, row, n);
-        if (difference && c > 0) {
-            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
-        }
         if (cg) {
             double* g = cg + 3 * c * n;
-            mChildren[c]->gradients(x, y, z, g, g + n, g + 2 * n, n);
+            mChildren[c]->valuesAndGradients(x, y, z, row, g, g + n, g + 2 * n, n);
+        } else {
+            mChildren[c]->values(x, y, z, row, n);
+        }
+        if (difference && c > 0) {
+            for (std::size_t i = 0; i < n; ++i) row[i] = -row[i];
         }
     }
 }
 
 void Blend::gradientsFromRows(const double* terms, const double* cg, std::size_t n, double* w,
-                              double* gx, double* gy, double* gz) const
+                              bool haveWeights, double* gx, double* gy, double* gz) const
 {
     const std::size_t m = mChildren.size();
-    if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
+    if (!haveWeights && mKernel.kind == BlendKernel::Kind::SuperElliptic) {
         superEllipticBatch(mOp, mKernel.p, terms, m, n, nullptr, w);
-    } else {
+    } else if (!haveWeights) {
         std::vector<double> t(m), wp(m);
         for (std::size_t i = 0; i < n; ++i) {
             for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
@@ -305,9 +304,10 @@ void Blend::gradients(const double* x, const double* y, const double* z, double*
 {
     // The children's values and gradients in term-major buffers, then as gradient() per point.
     const std::size_t m = mChildren.size();
-    const Rows terms = rows(m * n), cg = rows(3 * m * n), w = rows(m * n);
-    childRows(x, y, z, n, terms.get(), cg.get());
-    gradientsFromRows(terms.get(), cg.get(), n, w.get(), gx, gy, gz);
+    detail::BatchRows rows(5 * m * n);
+    double *terms = rows.get(), *cg = terms + m * n, *w = cg + 3 * m * n;
+    childRows(x, y, z, n, terms, cg);
+    gradientsFromRows(terms, cg, n, w, false, gx, gy, gz);
 }
 
 void Blend::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
@@ -320,28 +320,36 @@ void Blend::valuesAndGradients(const double* x, const double* y, const double* z
     // values() and gradients() in one pass: the children once, and the exponentials shared by
     // the value and the weights (the same operations in the same order, so the same bits).
     const std::size_t m = mChildren.size();
-    const Rows terms = rows(m * n), cg = rows(3 * m * n), w = rows(m * n);
-    childRows(x, y, z, n, terms.get(), cg.get());
-    superEllipticBatch(mOp, mKernel.p, terms.get(), m, n, out, w.get());
-    weightedGradients(mOp == Op::Difference, cg.get(), w.get(), m, n, gx, gy, gz);
+    detail::BatchRows rows(5 * m * n);
+    double *terms = rows.get(), *cg = terms + m * n, *w = cg + 3 * m * n;
+    childRows(x, y, z, n, terms, cg);
+    superEllipticBatch(mOp, mKernel.p, terms, m, n, out, w);
+    weightedGradients(mOp == Op::Difference, cg, w, m, n, gx, gy, gz);
+}
+
+bool Blend::valuesFromRows(const double* terms, std::size_t n, double* values, double* w) const
+{
+    // Combined per point exactly as value() does.
+    const std::size_t m = mChildren.size();
+    if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
+        superEllipticBatch(mOp, mKernel.p, terms, m, n, values, w);
+        return w != nullptr;
+    }
+    std::vector<double> t(m);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
+        values[i] = mKernel.combine(mOp, t.data(), m);
+    }
+    return false;
 }
 
 void Blend::values(const double* x, const double* y, const double* z, double* out,
                    std::size_t n) const
 {
-    // Children into a term-major buffer, then combined per point exactly as value() does.
-    const std::size_t m = mChildren.size();
-    const Rows terms = rows(m * n);
+    // Children into a term-major buffer, then combined per point.
+    const detail::BatchRows terms(mChildren.size() * n);
     childRows(x, y, z, n, terms.get(), nullptr);
-    if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
-        superEllipticBatch(mOp, mKernel.p, terms.get(), m, n, out, nullptr);
-        return;
-    }
-    std::vector<double> t(m);
-    for (std::size_t i = 0; i < n; ++i) {
-        for (std::size_t c = 0; c < m; ++c) t[c] = terms[c * n + i];
-        out[i] = mKernel.combine(mOp, t.data(), m);
-    }
+    valuesFromRows(terms.get(), n, out, nullptr);
 }
 
 Interval Blend::interval(const BBoxd& box) const
@@ -362,10 +370,11 @@ void Blend::intervals(const double* cx, const double* cy, const double* cz, cons
 {
     // interval() per box, the children's in batches and the blend of the bounds in one loop.
     const std::size_t m = mChildren.size();
-    const Rows tlo = rows(m * n), thi = rows(m * n);
+    const detail::BatchRows rows(2 * m * n);
+    double *tlo = rows.get(), *thi = tlo + m * n;
     for (std::size_t c = 0; c < m; ++c) {
-        double* l = tlo.get() + c * n;
-        double* h = thi.get() + c * n;
+        double* l = tlo + c * n;
+        double* h = thi + c * n;
         mChildren[c]->intervals(cx, cy, cz, half, n, l, h);
         if (mOp == Op::Difference && c > 0) {
             for (std::size_t i = 0; i < n; ++i) {
@@ -376,8 +385,8 @@ void Blend::intervals(const double* cx, const double* cy, const double* cz, cons
         }
     }
     if (mKernel.kind == BlendKernel::Kind::SuperElliptic) {
-        superEllipticBatch(mOp, mKernel.p, tlo.get(), m, n, lo, nullptr);
-        superEllipticBatch(mOp, mKernel.p, thi.get(), m, n, hi, nullptr);
+        superEllipticBatch(mOp, mKernel.p, tlo, m, n, lo, nullptr);
+        superEllipticBatch(mOp, mKernel.p, thi, m, n, hi, nullptr);
         return;
     }
     std::vector<double> a(m), b(m);

@@ -9,6 +9,7 @@
 
 #include "../util/Simd.h"
 #include "Feet.h"
+#include "Scratch.h"
 
 #include <algorithm>
 #include <array>
@@ -42,6 +43,12 @@ constexpr double kConverged = 1e-4;
 inline bool roundConverged(double off, double tangential, double dist, double converged)
 {
     return off <= converged && tangential * tangential <= converged * dist;
+}
+/// roundConverged() from the squares of the tangential offset and the distance (t^2 <= c D as
+/// t^4 <= c^2 D^2, both sides non-negative).
+inline bool roundConverged2(double off, double tangential2, double dist2, double converged)
+{
+    return off <= converged && tangential2 * tangential2 <= converged * converged * dist2;
 }
 /// A certified distance agrees with the first-order estimate f / |grad f| within this share:
 /// a larger gap means the iteration went to another part of the surface (a medial axis) or
@@ -86,7 +93,7 @@ void firstOrder(const double* __restrict x, const double* __restrict y,
     for (std::size_t i = 0; i < n; ++i) {
         const double v = values[i], g2 = gx[i] * gx[i] + gy[i] * gy[i] + gz[i] * gz[i];
         const bool valid = g2 > 0.0 && std::isfinite(g2);
-        const double e = v / std::sqrt(g2);
+        const double inv2 = 1.0 / g2, e = v * std::sqrt(inv2), s = v * inv2;
         const bool done = v == 0.0 || std::abs(e) >= 2.0 * far;
         out.x[i] = x[i];
         out.y[i] = y[i];
@@ -94,19 +101,21 @@ void firstOrder(const double* __restrict x, const double* __restrict y,
         out.distance[i] = valid ? e : (v > 0.0 ? far : -far);
         out.ok[i] = valid && done;
         near[i] = valid && !done;
-        qx[i] = x[i] - v * gx[i] / g2;
-        qy[i] = y[i] - v * gy[i] / g2;
-        qz[i] = z[i] - v * gz[i] / g2;
+        qx[i] = x[i] - gx[i] * s;
+        qy[i] = y[i] - gy[i] * s;
+        qz[i] = z[i] - gz[i] * s;
     }
 }
 
 /// One round of the smooth iteration, for every point at once (a loop that vectorizes): at the
 /// current point q (value f, gradient h) of query point p, whether h is usable, q's distance off
-/// the surface and p's off q's normal, |p - q|, and the next point (onto the surface along h,
-/// then along the tangent plane towards the foot of the perpendicular from p).
+/// the surface, the squares of p's distance off q's normal and of |p - q|, and the next point
+/// (onto the surface along h, then along the tangent plane towards the foot of the
+/// perpendicular from p). One square root and one division a point: squares are compared
+/// where a length would need another.
 struct RoundState
 {
-    double off[kMaxBatch], tangential[kMaxBatch], dist[kMaxBatch];
+    double off[kMaxBatch], tangential2[kMaxBatch], dist2[kMaxBatch];
     double nx[kMaxBatch], ny[kMaxBatch], nz[kMaxBatch];
     bool valid[kMaxBatch];
 };
@@ -122,19 +131,19 @@ void smoothRound(const double* __restrict px, const double* __restrict py,
     for (std::size_t k = 0; k < m; ++k) {
         const double h2 = hx[k] * hx[k] + hy[k] * hy[k] + hz[k] * hz[k];
         st.valid[k] = h2 > 0.0 && std::isfinite(h2);
-        const double hl = std::sqrt(h2);
+        const double inv2 = 1.0 / h2, invl = std::sqrt(inv2);
         const double rx = px[k] - qx[k], ry = py[k] - qy[k], rz = pz[k] - qz[k];
-        const double ux = hx[k] / hl, uy = hy[k] / hl, uz = hz[k] / hl;
-        const double along = rx * ux + ry * uy + rz * uz;
-        const double tx = rx - ux * along, ty = ry - uy * along, tz = rz - uz * along;
-        st.off[k] = std::abs(f[k]) / hl;
-        st.tangential[k] = std::sqrt(tx * tx + ty * ty + tz * tz);
-        st.dist[k] = std::sqrt(rx * rx + ry * ry + rz * rz);
+        // (r . h) h / h2: r's part along the normal.
+        const double along = (rx * hx[k] + ry * hy[k] + rz * hz[k]) * inv2;
+        const double tx = rx - hx[k] * along, ty = ry - hy[k] * along, tz = rz - hz[k] * along;
+        st.off[k] = std::abs(f[k]) * invl;
+        st.tangential2[k] = tx * tx + ty * ty + tz * tz;
+        st.dist2[k] = rx * rx + ry * ry + rz * rz;
         // q -= h f / h2; then q += t - h (t . h) / h2 with t = p - q.
-        const double s = f[k] / h2;
+        const double s = f[k] * inv2;
         const double ax = qx[k] - hx[k] * s, ay = qy[k] - hy[k] * s, az = qz[k] - hz[k] * s;
         const double wx = px[k] - ax, wy = py[k] - ay, wz = pz[k] - az;
-        const double c = (wx * hx[k] + wy * hy[k] + wz * hz[k]) / h2;
+        const double c = (wx * hx[k] + wy * hy[k] + wz * hz[k]) * inv2;
         st.nx[k] = ax + (wx - hx[k] * c);
         st.ny[k] = ay + (wy - hy[k] * c);
         st.nz[k] = az + (wz - hz[k] * c);
@@ -204,13 +213,17 @@ void detail::smoothFootPoints(const Implicit& f, const double* x, const double* 
         const bool last = round + 1 == kMaxRounds;
         std::size_t kept = 0;
         for (std::size_t k = 0; k < m; ++k) {
-            if (!st.valid[k]) continue; // no gradient: not certified
-            if (roundConverged(st.off[k], st.tangential[k], st.dist[k], converged) || last) {
+            const bool valid = st.valid[k]; // no gradient: not certified, and no next point
+            const bool stop =
+                roundConverged2(st.off[k], st.tangential2[k], st.dist2[k], converged) || last;
+            if (valid && stop) {
                 // Certify q: on the surface, p on its normal, and the distance near the
                 // first-order estimate.
                 const std::size_t i = idx[k];
-                const double d = std::copysign(st.dist[k], values[i]), e = out.distance[i];
-                if (st.off[k] <= query.tolerance && st.tangential[k] <= query.tolerance &&
+                const double d = std::copysign(std::sqrt(st.dist2[k]), values[i]);
+                const double e = out.distance[i];
+                if (st.off[k] <= query.tolerance &&
+                    st.tangential2[k] <= query.tolerance * query.tolerance &&
                     std::abs(d - e) <= kEstimateAgreement * std::abs(e) + query.tolerance) {
                     out.distance[i] = d;
                     out.x[i] = qx[k];
@@ -218,8 +231,9 @@ void detail::smoothFootPoints(const Implicit& f, const double* x, const double* 
                     out.z[i] = qz[k];
                     out.ok[i] = true;
                 }
-                continue;
             }
+            // The points that go on, compacted without branches (as above; after the
+            // certification, which reads q at k >= kept).
             idx[kept] = idx[k];
             px[kept] = px[k];
             py[kept] = py[k];
@@ -227,7 +241,7 @@ void detail::smoothFootPoints(const Implicit& f, const double* x, const double* 
             qx[kept] = st.nx[k];
             qy[kept] = st.ny[k];
             qz[kept] = st.nz[k];
-            ++kept;
+            kept += valid && !stop ? 1 : 0;
         }
         m = kept;
     }
@@ -853,26 +867,58 @@ void Shell::footPoints(const double* x, const double* y, const double* z, const 
     detail::iterateUncertified(*this, x, y, z, values, n, query, out);
 }
 
+bool Blend::leadRuleApplies() const
+{
+    if (mChildren.size() > 64) return false;
+    for (const auto& c : mChildren) {
+        if (!c->isExactSdf()) return false;
+    }
+    return true;
+}
+
 void Blend::footPoints(const double* x, const double* y, const double* z, const double* values,
                        std::size_t n, const FootQuery& query, FootPoints& out) const
+{
+    if (!leadRuleApplies()) return Implicit::footPoints(x, y, z, values, n, query, out);
+    // The children's values and gradients once, for the lead rule and for the smooth
+    // iteration's start (the blend's gradient from them).
+    const std::size_t nc = mChildren.size();
+    detail::BatchRows rows(5 * nc * n);
+    double *terms = rows.get(), *cg = terms + nc * n, *w = cg + 3 * nc * n;
+    childRows(x, y, z, n, terms, cg);
+    feetFromRows(x, y, z, values, n, query, terms, cg, w, false, out);
+}
+
+void Blend::valuesAndFootPoints(const double* x, const double* y, const double* z, std::size_t n,
+                                const FootQuery& query, double* values, FootPoints& out) const
+{
+    if (!leadRuleApplies()) {
+        return Implicit::valuesAndFootPoints(x, y, z, n, query, values, out);
+    }
+    // values() and footPoints() from one evaluation of the children; the super-elliptic
+    // kernel's exponentials serve the values and the weights (values()' bits: the same
+    // operations in the same order).
+    const std::size_t nc = mChildren.size();
+    detail::BatchRows rows(5 * nc * n);
+    double *terms = rows.get(), *cg = terms + nc * n, *w = cg + 3 * nc * n;
+    childRows(x, y, z, n, terms, cg);
+    const bool haveWeights = valuesFromRows(terms, n, values, w);
+    feetFromRows(x, y, z, values, n, query, terms, cg, w, haveWeights, out);
+}
+
+void Blend::feetFromRows(const double* x, const double* y, const double* z, const double* values,
+                         std::size_t n, const FootQuery& query, const double* terms,
+                         const double* cg, double* w, bool haveWeights, FootPoints& out) const
 {
     // Where the deciding child (of exact SDFs) leads the next by more than the blend's reach
     // and swell, the blend is that child within the tolerance, and so is its distance (the
     // lead rule); elsewhere, the smooth iteration on the blended field.
     const std::size_t nc = mChildren.size();
-    bool exact = true;
-    for (const auto& c : mChildren) exact = exact && c->isExactSdf();
-    if (!exact || nc > 64) return Implicit::footPoints(x, y, z, values, n, query, out);
     auto termSign = [this](std::size_t c) {
         return mOp == Op::Union ? 1.0 : mOp == Op::Intersection ? -1.0 : (c == 0 ? -1.0 : 1.0);
     };
-    // The children's values and gradients once, for the lead rule and for the smooth
-    // iteration's start (the blend's gradient from them).
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
     const double lead = mKernel.reach(query.tolerance) + mKernel.swell(nc);
-    const std::unique_ptr<double[]> terms(new double[nc * n]), cg(new double[3 * nc * n]),
-        w(new double[nc * n]);
-    childRows(x, y, z, n, terms.get(), cg.get());
     std::size_t decider[kMaxBatch];
     bool anyBlended = false;
     for (std::size_t i = 0; i < n; ++i) {
@@ -891,7 +937,7 @@ void Blend::footPoints(const double* x, const double* y, const double* z, const 
         for (std::size_t i = 0; i < n; ++i) {
             if (!out.ok[i]) continue;
             // The deciding child's own gradient, a unit vector for an exact SDF.
-            const double* g = cg.get() + 3 * decider[i] * n;
+            const double* g = cg + 3 * decider[i] * n;
             const Vec3d grad(g[i], g[n + i], g[2 * n + i]);
             const double len = grad.length();
             if (!(len > 0.5 && len < 1.5)) {
@@ -906,7 +952,7 @@ void Blend::footPoints(const double* x, const double* y, const double* z, const 
     }
     if (!anyBlended) return;
     double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch];
-    gradientsFromRows(terms.get(), cg.get(), n, w.get(), gx, gy, gz);
+    gradientsFromRows(terms, cg, n, w, haveWeights, gx, gy, gz);
     detail::iterateUncertified(*this, x, y, z, values, n, query, out, gx, gy, gz);
 }
 

@@ -33,6 +33,14 @@ void Implicit::valuesAndGradients(const double* x, const double* y, const double
     gradients(x, y, z, gx, gy, gz, n);
 }
 
+void Implicit::valuesAndFootPoints(const double* x, const double* y, const double* z,
+                                   std::size_t n, const FootQuery& query, double* values,
+                                   FootPoints& out) const
+{
+    this->values(x, y, z, values, n);
+    footPoints(x, y, z, values, n, query, out);
+}
+
 void Implicit::intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
                          std::size_t n, double* lo, double* hi) const
 {

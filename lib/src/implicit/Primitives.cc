@@ -108,31 +108,57 @@ double Sphere::value(const Vec3d& p) const
 
 Vec3d Sphere::gradient(const Vec3d& p) const
 {
+    // (p - c) times 1 / |p - c|: one division, not three (the batches' arithmetic).
     const Vec3d d = p - mCenter;
     const double len = d.length();
-    return len > 0.0 ? d / len : Vec3d(0.0, 0.0, 1.0);
+    if (!(len > 0.0)) return Vec3d(0.0, 0.0, 1.0);
+    const double inv = 1.0 / len;
+    return Vec3d(d[0] * inv, d[1] * inv, d[2] * inv);
 }
+
+namespace {
+
+/// Sphere values (|p - c| - r, as sphereValue()) and gradients (as Sphere::gradient()) over a
+/// batch, either output null; a loop that vectorizes (the gradients into local arrays, which
+/// alias nothing).
+IVDB_CLONE_INLINE void spherePoints(const Vec3d& c, double r, const double* x, const double* y,
+                                    const double* z, std::size_t n, double* out, double* gx,
+                                    double* gy, double* gz)
+{
+    const double cx = c[0], cy = c[1], cz = c[2];
+    double ux[kMaxBatch], uy[kMaxBatch], uz[kMaxBatch], v[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        const double dx = x[i] - cx, dy = y[i] - cy, dz = z[i] - cz;
+        const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
+        v[i] = len - r;
+        const bool ok = len > 0.0;
+        const double inv = 1.0 / (ok ? len : 1.0);
+        ux[i] = ok ? dx * inv : 0.0;
+        uy[i] = ok ? dy * inv : 0.0;
+        uz[i] = ok ? dz * inv : 1.0;
+    }
+    if (out) std::copy(v, v + n, out);
+    if (gx) {
+        std::copy(ux, ux + n, gx);
+        std::copy(uy, uy + n, gy);
+        std::copy(uz, uz + n, gz);
+    }
+}
+
+} // namespace
 
 IVDB_VECTOR_CLONES
 void Sphere::gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                        double* gz, std::size_t n) const
 {
-    // gradient()'s arithmetic (Vec3d::length, then a division per component), written out into
-    // local arrays (which alias nothing) so that the loop vectorizes.
-    const double cx = mCenter[0], cy = mCenter[1], cz = mCenter[2];
-    double ux[kMaxBatch], uy[kMaxBatch], uz[kMaxBatch];
-    for (std::size_t i = 0; i < n; ++i) {
-        const double dx = x[i] - cx, dy = y[i] - cy, dz = z[i] - cz;
-        const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
-        const bool ok = len > 0.0;
-        const double l = ok ? len : 1.0;
-        ux[i] = ok ? dx / l : 0.0;
-        uy[i] = ok ? dy / l : 0.0;
-        uz[i] = ok ? dz / l : 1.0;
-    }
-    std::copy(ux, ux + n, gx);
-    std::copy(uy, uy + n, gy);
-    std::copy(uz, uz + n, gz);
+    spherePoints(mCenter, mRadius, x, y, z, n, nullptr, gx, gy, gz);
+}
+
+IVDB_VECTOR_CLONES
+void Sphere::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
+                                double* gx, double* gy, double* gz, std::size_t n) const
+{
+    spherePoints(mCenter, mRadius, x, y, z, n, out, gx, gy, gz);
 }
 
 IVDB_VECTOR_CLONES

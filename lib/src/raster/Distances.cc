@@ -11,16 +11,23 @@ namespace ivdb::raster::detail {
 
 using implicit::Vec3d;
 
-void trueDistances(const implicit::Implicit& f, const openvdb::Coord& origin, const int* offsets,
-                   const double* x, const double* y, const double* z, const double* values,
-                   std::size_t n, const DistanceSettings& s, double* out, DistanceCounts& counts)
+namespace {
+
+implicit::FootQuery footQuery(const DistanceSettings& s)
 {
-    implicit::FootPoints feet;
     implicit::FootQuery query;
     query.tolerance = s.tolerance;
     query.far = s.band; // no foot point is solved for beyond the band
     query.feet = false;
-    f.footPoints(x, y, z, values, n, query, feet);
+    return query;
+}
+
+/// The certified feet's distances, the lattice search for the others.
+void finishDistances(const implicit::Implicit& f, const openvdb::Coord& origin,
+                     const int* offsets, const double* values, std::size_t n,
+                     const DistanceSettings& s, const implicit::FootPoints& feet, double* out,
+                     DistanceCounts& counts)
+{
     for (std::size_t i = 0; i < n; ++i) {
         if (feet.ok[i]) {
             out[i] = feet.distance[i];
@@ -33,6 +40,27 @@ void trueDistances(const implicit::Implicit& f, const openvdb::Coord& origin, co
         out[i] = searchDistance(f, ijk, values[i], s, certified);
         ++(std::isnan(out[i]) ? counts.unknown : certified ? counts.searched : counts.approximate);
     }
+}
+
+} // namespace
+
+void trueDistances(const implicit::Implicit& f, const openvdb::Coord& origin, const int* offsets,
+                   const double* x, const double* y, const double* z, const double* values,
+                   std::size_t n, const DistanceSettings& s, double* out, DistanceCounts& counts)
+{
+    implicit::FootPoints feet;
+    f.footPoints(x, y, z, values, n, footQuery(s), feet);
+    finishDistances(f, origin, offsets, values, n, s, feet, out, counts);
+}
+
+void valuesAndTrueDistances(const implicit::Implicit& f, const openvdb::Coord& origin,
+                            const int* offsets, const double* x, const double* y,
+                            const double* z, std::size_t n, const DistanceSettings& s,
+                            double* values, double* out, DistanceCounts& counts)
+{
+    implicit::FootPoints feet;
+    f.valuesAndFootPoints(x, y, z, n, footQuery(s), values, feet);
+    finishDistances(f, origin, offsets, values, n, s, feet, out, counts);
 }
 
 double searchDistance(const implicit::Implicit& f, const openvdb::Coord& ijk, double value,

@@ -46,6 +46,13 @@ struct DistanceCounts
 void trueDistances(const implicit::Implicit& f, const openvdb::Coord& origin, const int* offsets,
                    const double* x, const double* y, const double* z, const double* values,
                    std::size_t n, const DistanceSettings& s, double* out, DistanceCounts& counts);
+/// @brief trueDistances() for points whose values are not known yet: they are computed into
+/// @a values (value() at each point) with the foot points (Implicit::valuesAndFootPoints), the
+/// same numbers as values() followed by the call above.
+void valuesAndTrueDistances(const implicit::Implicit& f, const openvdb::Coord& origin,
+                            const int* offsets, const double* x, const double* y,
+                            const double* z, std::size_t n, const DistanceSettings& s,
+                            double* values, double* out, DistanceCounts& counts);
 
 /// @brief The last resort where no local method is certified (a singular point, a medial axis,
 /// a thin feature, a corner of three surfaces): @a f on the voxel lattice around @a ijk (a cube

@@ -195,13 +195,20 @@ void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, c
                 else take(n);
             }
         }
-        f.values(sx, sy, sz, sv, std::size_t(m));
+    }
+    detail::DistanceCounts dc;
+    if (m > 0 && ctx.boundedByDistance) {
+        detail::trueDistances(f, origin, index, sx, sy, sz, sv, std::size_t(m), ctx.distances,
+                              d, dc);
+    } else if (m > 0) {
+        // The values with the distances: a node whose foot points start from the same
+        // evaluations (a blend) makes them once.
+        detail::valuesAndTrueDistances(f, origin, index, sx, sy, sz, std::size_t(m),
+                                       ctx.distances, sv, d, dc);
         for (int k = 0; k < m; ++k) inside = inside || sv[k] < 0.0;
     }
     if (counts && inside && !counts->anyInside) counts->anyInside = true;
     if (m == 0) return;
-    detail::DistanceCounts dc;
-    detail::trueDistances(f, origin, index, sx, sy, sz, sv, std::size_t(m), ctx.distances, d, dc);
     if (counts) counts->add(dc);
     for (int k = 0; k < m; ++k) v[index[k]] = d[k];
 }

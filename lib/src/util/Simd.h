@@ -3,15 +3,16 @@
 
 /// @file Simd.h
 /// @brief IVDB_VECTOR_CLONES, put before a function whose loops vectorize: the function is
-/// compiled twice, for x86-64's baseline (SSE2, two doubles a vector) and for AVX2 (four), and
-/// the loader picks the one the CPU runs (GNU ifunc). AVX2 without FMA: both versions round
-/// every add, multiply, divide and square root as IEEE 754 says, so a grid's bytes do not depend
-/// on the machine that made it. Off under the sanitizers (their run-time starts after the
-/// loader has resolved such functions) and off x86-64 Linux.
+/// compiled three times, for x86-64's baseline (SSE2, two doubles a vector), AVX2 (four) and
+/// AVX-512 (eight), and the loader picks the best one the CPU runs (GNU ifunc). The library is
+/// built without fused multiply-adds (-ffp-contract=off, lib/CMakeLists.txt), so every version
+/// rounds every add, multiply, divide and square root as IEEE 754 says, and a grid's bytes do
+/// not depend on the machine that made it. Off under the sanitizers (their run-time starts
+/// after the loader has resolved such functions) and off x86-64 Linux.
 
 #if defined(__x86_64__) && defined(__linux__) && (defined(__GNUC__) || defined(__clang__)) && \
     !defined(IVDB_SANITIZED)
-#define IVDB_VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
+#define IVDB_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define IVDB_VECTOR_CLONES
 #endif

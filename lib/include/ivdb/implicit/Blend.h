@@ -93,6 +93,11 @@ public:
     /// smooth iteration elsewhere.
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
+    /// The children evaluated once for the values, the lead rule and the smooth iteration's
+    /// start (exact SDF children).
+    void valuesAndFootPoints(const double* x, const double* y, const double* z, std::size_t n,
+                             const FootQuery& query, double* values,
+                             FootPoints& out) const override;
     /// Exact for a blend of exact intervals: the blend is monotone in every child.
     Interval interval(const BBoxd& box) const override;
     void intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
@@ -118,9 +123,19 @@ private:
     void childRows(const double* x, const double* y, const double* z, std::size_t n,
                    double* terms, double* cg) const;
     /// The blend's gradients from childRows()' terms and gradients, with the weights d f / d t
-    /// into @a w (a row of n per child).
+    /// in @a w (a row of n per child): computed into it, or already there if @a haveWeights.
     void gradientsFromRows(const double* terms, const double* cg, std::size_t n, double* w,
-                           double* gx, double* gy, double* gz) const;
+                           bool haveWeights, double* gx, double* gy, double* gz) const;
+    /// The blend's values from childRows()' terms (values()' bits) into @a values; true if the
+    /// kernel gave the weights d f / d t with them, into @a w (the super-elliptic one does).
+    bool valuesFromRows(const double* terms, std::size_t n, double* values, double* w) const;
+    /// True if the foot points can use the lead rule: every child an exact SDF, at most 64.
+    bool leadRuleApplies() const;
+    /// footPoints() from childRows()' @a terms and gradients @a cg; @a w holds the weights
+    /// d f / d t if @a haveWeights, else is where they are computed.
+    void feetFromRows(const double* x, const double* y, const double* z, const double* values,
+                      std::size_t n, const FootQuery& query, const double* terms,
+                      const double* cg, double* w, bool haveWeights, FootPoints& out) const;
 
     Op mOp;
     BlendKernel mKernel;

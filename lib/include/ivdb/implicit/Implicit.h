@@ -88,6 +88,12 @@ public:
     virtual void footPoints(const double* x, const double* y, const double* z,
                             const double* values, std::size_t n, const FootQuery& query,
                             FootPoints& out) const;
+    /// @brief values() into @a values, then footPoints() at the same points: the same bits as
+    /// the two calls. The default makes them; nodes whose foot points start from the same
+    /// evaluations as their values (a blend's children) override it to evaluate once.
+    virtual void valuesAndFootPoints(const double* x, const double* y, const double* z,
+                                     std::size_t n, const FootQuery& query, double* values,
+                                     FootPoints& out) const;
     /// @brief An interval that contains f(p) for every p in @a box.
     virtual Interval interval(const BBoxd& box) const = 0;
     /// @brief Intervals over @a n <= kMaxBatch boxes of one size: box i is the centre (cx[i],

@@ -20,6 +20,9 @@ public:
                 std::size_t n) const override;
     void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                    double* gz, std::size_t n) const override;
+    /// One square root a point for both.
+    void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
+                            double* gx, double* gy, double* gz, std::size_t n) const override;
     Interval interval(const BBoxd& box) const override;
     void intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
                    std::size_t n, double* lo, double* hi) const override;
