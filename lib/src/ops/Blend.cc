@@ -122,11 +122,12 @@ std::vector<Coord> leafOrigins(const MaskTree& mask)
 
 int leavesFor(double voxels) { return int(std::ceil(voxels / kLeafDim)); }
 
-/// A band voxel's surface point c = x - phi(x) n and unit normal n (index space): the plane
-/// the extension passes on.
-struct Seed
+/// The band voxels' surface points c = x - phi(x) n and unit normals n (index space): the
+/// planes the extension passes on, seed k's at index k. Apart, so that the search for the
+/// nearest point reads 12 bytes a seed, not 24.
+struct Seeds
 {
-    openvdb::Vec3s point, normal;
+    std::vector<openvdb::Vec3s> point, normal;
 };
 
 /// An input's band grown around the crease: its values (the known voxels active) and, when grown
@@ -136,7 +137,7 @@ struct GrownBand
 {
     openvdb::FloatGrid::Ptr values;
     openvdb::Int32Tree::Ptr seedOf;                   // null when grown by fast sweeping
-    std::shared_ptr<const std::vector<Seed>> seeds;
+    std::shared_ptr<const Seeds> seeds;
 };
 
 // The voxels of @a grid's band within @a keep (a voxel mask), extended by @a dilation voxels
@@ -161,7 +162,7 @@ public:
         : mGrid(grid), mKeep(keep), mDx(grid.voxelSize()[0]),
           mExt(openvdb::FloatGrid::create(grid.background())),
           mSeedOf(std::make_shared<SeedTree>(-1)),
-          mSeeds(std::make_shared<std::vector<Seed>>()),
+          mSeeds(std::make_shared<Seeds>()),
           mNear(std::make_shared<MaskTree>())
     {
         mExt->setTransform(grid.transform().copy());
@@ -192,7 +193,8 @@ public:
             markNear(it->origin(), copy->getValueMask());
             first.push_back(first.back() + copy->onVoxelCount());
         }
-        mSeeds->resize(first.back());
+        mSeeds->point.resize(first.back());
+        mSeeds->normal.resize(first.back());
         // Each leaf by one thread; reads of the input only.
         tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
                           [&](const tbb::blocked_range<size_t>& r) {
@@ -429,7 +431,7 @@ private:
             v = value[c];
             return on[c];
         };
-        std::vector<Seed>& seeds = *mSeeds;
+        Seeds& seeds = *mSeeds;
         size_t next = first;
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const Coord ijk = it.getCoord();
@@ -448,7 +450,8 @@ private:
             const double len = g.length();
             const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
             const openvdb::Vec3d nv = len > 0.0 ? g / len : openvdb::Vec3d(0.0);
-            seeds[next] = Seed{openvdb::Vec3s(x - nv * (double(v0) / mDx)), openvdb::Vec3s(nv)};
+            seeds.point[next] = openvdb::Vec3s(x - nv * (double(v0) / mDx));
+            seeds.normal[next] = openvdb::Vec3s(nv);
             seedOf.setValueOnly(it.pos(), int(next++));
         }
     }
@@ -516,7 +519,7 @@ private:
             step[j] = Neighbourhood::index(kNeighbours[j].x(), kNeighbours[j].y(), kNeighbours[j].z()) -
                       Neighbourhood::index(0, 0, 0);
         }
-        const std::vector<Seed>& seeds = *mSeeds;
+        const openvdb::Vec3s* points = mSeeds->point.data();
         const LeafT* in = r.in.probeConstLeaf(origin);
         const float tile = in ? 0.0f : r.in.getValue(origin);
         int* out = t.seeds;
@@ -534,12 +537,11 @@ private:
                 const int k = nb.seed[center + step[j]];
                 if (k < 0 || k == last) continue; // a seed just weighed gives the same distance
                 last = k;
-                const double dist = (y - openvdb::Vec3d(seeds[size_t(k)].point)).lengthSqr();
+                const double dist = (y - openvdb::Vec3d(points[k])).lengthSqr();
                 if (dist < best) best = dist, from = k;
             }
             if (from < 0) continue; // every todo voxel has a known neighbour
-            const Seed& seed = seeds[size_t(from)];
-            const openvdb::Vec3d c(seed.point), nv(seed.normal);
+            const openvdb::Vec3d c(points[from]), nv(mSeeds->normal[size_t(from)]);
             double d = (y - c).dot(nv);
             if (nv.lengthSqr() == 0.0) d = std::sqrt(best); // no normal: the point
             const double sign = (in ? in->getValue(m) : tile) < 0.0f ? -1.0 : 1.0;
@@ -554,7 +556,7 @@ private:
     const double mDx;
     openvdb::FloatGrid::Ptr mExt;
     SeedTree::Ptr mSeedOf;    // each known voxel's seed (active where known)
-    std::shared_ptr<std::vector<Seed>> mSeeds;
+    std::shared_ptr<Seeds> mSeeds;
     MaskTree mKnown;           // voxels with a value and a seed (leaves only, no tiles)
     MaskTree::Ptr mNear;       // the leaves next to the last layer (or the seeds), coarse
     std::vector<int> mLayerSeeds; // the layer's seeds until it is done (Target::seeds)
@@ -1078,10 +1080,10 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
         auto planeAt = [&](size_t i, const Coord& ijk, Plane& p) { // false: p unchanged
             int k;
             if (!seedOf[i].probeValue(ijk, k)) return false; // not reached
-            const Seed& seed = (*grown[i].seeds)[size_t(k)];
-            const openvdb::Vec3d m = termSign(i) * openvdb::Vec3d(seed.normal);
+            const Seeds& seeds = *grown[i].seeds;
+            const openvdb::Vec3d m = termSign(i) * openvdb::Vec3d(seeds.normal[size_t(k)]);
             if (m.lengthSqr() < 0.25) return false; // no normal
-            p.c = openvdb::Vec3d(seed.point);
+            p.c = openvdb::Vec3d(seeds.point[size_t(k)]);
             p.m = m;
             p.seed = k;
             return true;

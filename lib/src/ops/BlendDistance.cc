@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: Apache-2.0
 #include "BlendDistance.h"
 
+#include "../implicit/FastMath.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -16,6 +18,14 @@ UnionKernel UnionKernel::inUnits(const implicit::BlendKernel& kernel, double uni
 }
 
 namespace {
+
+/// ln(1 + e) for e in [0, 1], to a few ulp: the log of u = 1 + e, corrected for the rounding
+/// of u (e - (u - 1) is exact), so small e keep their digits.
+inline double log1p(double e)
+{
+    const double u = 1.0 + e;
+    return implicit::detail::logPositive(u) + (e - (u - 1.0)) / u;
+}
 
 /// h and its first two derivatives in the iteration's variable t (logit w for the
 /// super-elliptic kernel, w for the smooth minimum).
@@ -45,8 +55,8 @@ public:
             d2w = 0.0;
         } else {
             // w = 1 / (1 + e^-t); ln w = -softplus(-t), ln(1 - w) = -softplus(t), all from
-            // e = e^-|t|.
-            const double e = std::exp(-std::abs(t)), l = std::log1p(e);
+            // e = e^-|t| (the implicit blend's exp and log: no library calls).
+            const double e = implicit::detail::expNonPositive(-std::abs(t)), l = log1p(e);
             w = t >= 0.0 ? 1.0 / (1.0 + e) : e / (1.0 + e);
             const double lnW = -(std::max(-t, 0.0) + l), ln1W = -(std::max(t, 0.0) + l);
             const double ww = w * (1.0 - w);
