@@ -604,6 +604,38 @@ TEST_F(TestImplicit, BatchGradientsAndTheFusedCallMatchBitForBit)
     }
 }
 
+TEST_F(TestImplicit, ValuesAndFootPointsMatchTheTwoCallsBitForBit)
+{
+    // valuesAndFootPoints() (one evaluation of a blend's children for the values, the lead rule
+    // and the iteration's start) gives values() and then footPoints() of those values, bit for
+    // bit: for every node and for blends of every operation and both kernels.
+    FootQuery query;
+    query.tolerance = 1e-6;
+    query.far = 0.5;
+    for (const Case& c : withBlends(allCases())) {
+        for (std::size_t n : {std::size_t(1), std::size_t(37), kMaxBatch}) {
+            std::vector<double> x(n), y(n), z(n), v(n), fv(n);
+            for (std::size_t i = 0; i < n; ++i) {
+                x[i] = uniform(-4, 4);
+                y[i] = uniform(-4, 4);
+                z[i] = uniform(-4, 4);
+            }
+            auto two = std::make_unique<FootPoints>(), one = std::make_unique<FootPoints>();
+            c.f->values(x.data(), y.data(), z.data(), v.data(), n);
+            c.f->footPoints(x.data(), y.data(), z.data(), v.data(), n, query, *two);
+            c.f->valuesAndFootPoints(x.data(), y.data(), z.data(), n, query, fv.data(), *one);
+            for (std::size_t i = 0; i < n; ++i) {
+                ASSERT_EQ(fv[i], v[i]) << c.name << " i=" << i;
+                ASSERT_EQ(one->ok[i], two->ok[i]) << c.name << " i=" << i;
+                ASSERT_EQ(one->distance[i], two->distance[i]) << c.name << " i=" << i;
+                ASSERT_EQ(one->x[i], two->x[i]) << c.name << " i=" << i;
+                ASSERT_EQ(one->y[i], two->y[i]) << c.name << " i=" << i;
+                ASSERT_EQ(one->z[i], two->z[i]) << c.name << " i=" << i;
+            }
+        }
+    }
+}
+
 TEST_F(TestImplicit, IntervalContainsValues)
 {
     // Intervals are not outward-rounded (documented), so allow rounding slack of 1e-12 relative.

@@ -175,7 +175,7 @@ struct EigenQuadric
     }
 
     /// One Newton step for the point (a, b, e) in the eigenframe: mu moves, the step is returned.
-    double newtonStep(double a, double b, double e, double& u) const
+    IVDB_CLONE_INLINE double newtonStep(double a, double b, double e, double& u) const
     {
         const double i0 = 1.0 / (1.0 + 2.0 * u * d0), i1 = 1.0 / (1.0 + 2.0 * u * d1),
                      i2 = 1.0 / (1.0 + 2.0 * u * d2);
@@ -197,8 +197,9 @@ struct EigenQuadric
     /// The foot point (q0, q1, q2) for the multiplier @a u of the point (a, b, e), its distance,
     /// and whether it is certified: on the surface within @a tol, inside (lo, hi), and its
     /// distance within @a agreement of the first-order estimate @a est.
-    bool foot(double a, double b, double e, double u, double est, double tol, double agreement,
-              double& q0, double& q1, double& q2, double& dist) const
+    IVDB_CLONE_INLINE bool foot(double a, double b, double e, double u, double est, double tol,
+                                double agreement, double& q0, double& q1, double& q2,
+                                double& dist) const
     {
         const double e0 = 1.0 + 2.0 * u * d0, e1 = 1.0 + 2.0 * u * d1, e2 = 1.0 + 2.0 * u * d2;
         q0 = (a - 2.0 * u * b0) / e0;
