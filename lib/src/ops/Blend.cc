@@ -393,10 +393,20 @@ private:
         if (dense) {
             std::fill(std::begin(on), std::end(on), false);
             std::fill(std::begin(value), std::end(value), 0.0f); // read only where on
-            for (openvdb::Index m = 0; m < LeafT::SIZE; ++m) {
-                const Coord l = LeafT::offsetToLocalCoord(m);
-                value[index(l.x(), l.y(), l.z())] = center->getValue(m);
-                on[index(l.x(), l.y(), l.z())] = center->isValueOn(m);
+            // A row along z at a time: the leaf's buffer and the row's 8 bits of its mask word.
+            const float* values = center->buffer().data();
+            const auto& mask = center->getValueMask();
+            for (int x = 0; x < kLeafDim; ++x) {
+                const auto word = mask.template getWord<std::uint64_t>(openvdb::Index(x));
+                for (int y = 0; y < kLeafDim; ++y) {
+                    const float* row = values + (x << (2 * kLeafLog2)) + (y << kLeafLog2);
+                    const unsigned bits = unsigned(word >> (kLeafDim * y)) & 0xFFu;
+                    const int to = index(x, y, 0);
+                    for (int z = 0; z < kLeafDim; ++z) {
+                        value[to + z] = row[z];
+                        on[to + z] = (bits >> z) & 1u;
+                    }
+                }
             }
         }
         for (int a = 0; a < 3 && dense; ++a) {
@@ -433,19 +443,34 @@ private:
         };
         Seeds& seeds = *mSeeds;
         size_t next = first;
+        constexpr int kStride[3] = {D * D, D, 1}; // one voxel along x, y, z in value and on
         for (auto it = leaf.cbeginValueOn(); it; ++it) {
             const Coord ijk = it.getCoord();
             float v0;
-            sample(ijk, v0);
             openvdb::Vec3d g;
-            for (int a = 0; a < 3; ++a) {
-                Coord dp = ijk, dm = ijk;
-                dp[a] += 1;
-                dm[a] -= 1;
-                float vp, vm;
-                const bool p = sample(dp, vp), m = sample(dm, vm);
-                g[a] = p && m ? 0.5 * (double(vp) - vm) : p ? double(vp) - v0
+            // Central differences where both neighbours are in the band, one-sided at its edge.
+            auto difference = [&v0](bool p, float vp, bool m, float vm) {
+                return p && m ? 0.5 * (double(vp) - vm) : p ? double(vp) - v0
                      : m      ? double(v0) - vm           : 0.0;
+            };
+            if (dense) {
+                const openvdb::Index o = it.pos();
+                const int c = index(int(o >> 6), int((o >> 3) & 7), int(o & 7));
+                v0 = value[c];
+                for (int a = 0; a < 3; ++a) {
+                    const int up = c + kStride[a], down = c - kStride[a];
+                    g[a] = difference(on[up], value[up], on[down], value[down]);
+                }
+            } else {
+                sample(ijk, v0);
+                for (int a = 0; a < 3; ++a) {
+                    Coord dp = ijk, dm = ijk;
+                    dp[a] += 1;
+                    dm[a] -= 1;
+                    float vp, vm;
+                    const bool p = sample(dp, vp), m = sample(dm, vm);
+                    g[a] = difference(p, vp, m, vm);
+                }
             }
             const double len = g.length();
             const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
