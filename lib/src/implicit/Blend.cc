@@ -312,18 +312,15 @@ void Blend::gradients(const double* x, const double* y, const double* z, double*
 void Blend::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
                                double* gx, double* gy, double* gz, std::size_t n) const
 {
-    if (mKernel.kind != BlendKernel::Kind::SuperElliptic) {
-        Implicit::valuesAndGradients(x, y, z, out, gx, gy, gz, n);
-        return;
-    }
-    // values() and gradients() in one pass: the children once, and the exponentials shared by
-    // the value and the weights (the same operations in the same order, so the same bits).
+    // values() and gradients() in one pass: the children once, and the super-elliptic kernel's
+    // exponentials shared by the value and the weights (the same operations in the same order,
+    // so the same bits).
     const std::size_t m = mChildren.size();
     detail::BatchRows rows(5 * m * n);
     double *terms = rows.get(), *cg = terms + m * n, *w = cg + 3 * m * n;
     childRows(x, y, z, n, terms, cg);
-    superEllipticBatch(mOp, mKernel.p, terms, m, n, out, w);
-    weightedGradients(mOp == Op::Difference, cg, w, m, n, gx, gy, gz);
+    const bool haveWeights = valuesFromRows(terms, n, out, w);
+    gradientsFromRows(terms, cg, n, w, haveWeights, gx, gy, gz);
 }
 
 bool Blend::valuesFromRows(const double* terms, std::size_t n, double* values, double* w) const
