@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -132,4 +133,60 @@ TEST(TestBlendDistance, EqualsTheNearestZeroOfTheBlendOfTwoPlanes)
     EXPECT_GT(checked, 600);
 #endif
     std::printf("worst difference %.2e over %d points, %d refused\n", worst, checked, refused);
+}
+
+// The first-order estimate, which the grid blend uses to pick the planes of the voxel near the
+// nearest point before solving: the blend at x over the length of its gradient, with the
+// gradient's weight, from the formulas above.
+TEST(TestBlendDistance, FirstOrderEstimateIsTheBlendOverItsGradient)
+{
+    UnionKernel kernels[6];
+    const double ps[3] = {0.4, 1.5, 6.0};
+    const double ks[3] = {1.0, 4.0, 12.0};
+    for (int i = 0; i < 3; ++i) {
+        kernels[i].p = ps[i];
+        kernels[3 + i].polynomial = true;
+        kernels[3 + i].k = ks[i];
+    }
+    int checked = 0;
+    double worstFoot = 0.0;
+    for (const UnionKernel& k : kernels) {
+        for (const double degrees : {15.0, 50.0, 90.0, 130.0}) {
+            const double c = std::cos(degrees * kPi / 180.0), sn = std::sin(degrees * kPi / 180.0);
+            for (double a = -3.0; a <= 3.01; a += 0.25) {
+                for (double b = -3.0; b <= 3.01; b += 0.25) {
+                    // The weight of a in the blend's gradient: dU/da.
+                    const double w = k.polynomial
+                        ? std::clamp(0.5 + (b - a) / (2.0 * k.k), 0.0, 1.0)
+                        : 1.0 / (1.0 + std::exp(-k.p * (b - a)));
+                    const double g = std::sqrt(1.0 - 2.0 * (1.0 - c) * w * (1.0 - w));
+                    const PlaneBlendDistance e = planeBlendEstimate(k, a, b, c);
+                    ASSERT_TRUE(e.ok);
+                    ASSERT_NEAR(e.weight, w, 1e-12) << degrees << " " << a << " " << b;
+                    ASSERT_NEAR(e.distance, unionBlend(k, a, b) / g, 1e-12)
+                        << (k.polynomial ? "k " : "p ") << (k.polynomial ? k.k : k.p) << ", "
+                        << degrees << " degrees, a " << a << ", b " << b;
+                    // How far its foot point x - (distance / |g|) g is from the exact one (for
+                    // the record: it costs only steps).
+                    const PlaneBlendDistance d = planeBlendDistance(k, a, b, c);
+                    auto foot = [&](const PlaneBlendDistance& r, double out[2]) {
+                        const double gx = r.weight + (1.0 - r.weight) * c, gy = (1.0 - r.weight) * sn;
+                        const double len = std::hypot(gx, gy);
+                        out[0] = -r.distance / len * gx;
+                        out[1] = -r.distance / len * gy;
+                    };
+                    double fd[2], fe[2];
+                    foot(d, fd);
+                    foot(e, fe);
+                    if (std::abs(d.distance) <= 1.0) {
+                        worstFoot = std::max(worstFoot, std::hypot(fd[0] - fe[0], fd[1] - fe[1]));
+                    }
+                    ++checked;
+                }
+            }
+        }
+    }
+    EXPECT_EQ(checked, 6 * 4 * 25 * 25);
+    std::printf("%d points; within 1 of the surface the first-order foot point is up to %.3f "
+                "from the nearest point\n", checked, worstFoot);
 }

@@ -1157,6 +1157,22 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                 const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
                 // Each term's own distance at x: what the blend is where one term weighs all.
                 const double ownA = pa.m.dot(x - pa.c), ownB = pb.m.dot(x - pb.c);
+                // Start from the planes of the voxel nearest x's first-order foot point with
+                // x's planes (detail::planeBlendEstimate(): no minimization). Started from x's
+                // own planes, nearly every voxel took a second minimization (within the band
+                // each voxel is its own seed, so y's planes differ); from the predicted ones
+                // 94% (p = 1000) to 97% (p = 320) settle after one on the radius-400 pair.
+                {
+                    const detail::PlaneBlendDistance e =
+                        detail::planeBlendEstimate(kernel, ownA, ownB, pa.m.dot(pb.m));
+                    const openvdb::Vec3d g = e.weight * pa.m + (1.0 - e.weight) * pb.m;
+                    const double len = g.length();
+                    if (e.ok && len > 1e-6) {
+                        const Coord at = openvdb::Coord::round(x - (e.distance / len) * g);
+                        planeAt(i1, at, pa);
+                        planeAt(i2, at, pb);
+                    }
+                }
                 double phi = 0.0, previous = 0.0, weight = -1.0, lastWeight = -1.0;
                 double seen[kMaxSteps], seenWeight[kMaxSteps]; // each step's distance, weight
                 bool settled = false, cycle = false;

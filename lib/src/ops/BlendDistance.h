@@ -43,8 +43,15 @@ struct PlaneBlendDistance
 /// entropy -w ln w - (1 - w) ln(1 - w)) and k w (1 - w) for the smooth minimum. The distance is
 /// the least h over w in [0, 1], found by a safeguarded Newton iteration (on logit w for the
 /// super-elliptic blend, whose minimum is always inside (0, 1)), from the weight @a start if it
-/// is in [0, 1] (a previous answer's), else from the kernel's own weight at x.
+/// is in [0, 1] (a previous answer's), else from the kernel's weight at x's first-order foot
+/// point (x - f g / |g|^2, f the blend at x and g its gradient), which is near the least.
 PlaneBlendDistance planeBlendDistance(const UnionKernel& kernel, double a, double b, double c,
                                       double start = -1.0);
+
+/// @brief The first-order estimate of planeBlendDistance(): the blend f at x over the length of
+/// its gradient g = w n_a + (1 - w) n_b, and w, so that x - (distance / |g|) g is x's
+/// first-order foot point. No minimization (one exponential and one logarithm): enough to say
+/// near which voxel the nearest point lies.
+PlaneBlendDistance planeBlendEstimate(const UnionKernel& kernel, double a, double b, double c);
 
 } // namespace ivdb::ops::detail
