@@ -1187,7 +1187,7 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                     // The planes of a few voxels taking turns: a distance seen before, at least
                     // two steps ago.
                     for (int j = iter - 2; j >= 0 && !cycle; --j) {
-                        if (std::abs(d.distance - seen[j]) < 1e-9) {
+                        if (std::abs(d.distance - seen[j]) < 1e-7) {
                             cycle = true;
                             phi = cycleDistance(seen + j, seenWeight + j, iter - j, ownA, ownB);
                         }

@@ -29,6 +29,9 @@ inline double log1p(double e, double u, double r)
 /// The super-elliptic iteration's range of logit w: e^-60 is far below any weight that
 /// changes h.
 constexpr double kTMax = 60.0;
+/// A Newton step predicted to gain less than this (voxels, relative to 1 + |h|) is taken
+/// without evaluating h where it lands.
+constexpr double kAcceptGain = 1e-7;
 
 /// h and its first two derivatives in the iteration's variable t (logit w for the
 /// super-elliptic kernel, w for the smooth minimum).
@@ -98,9 +101,22 @@ public:
         Sample s = at(std::max(lo, std::min(hi, t0)));
         for (int it = 0; it < 60; ++it) {
             double step = s.d2 > 0.0 ? -s.d1 / s.d2 : (s.d1 > 0.0 ? -maxStep : maxStep);
-            // Where h is convex, Newton's step gains about d1^2 / (2 d2): stop when that is
-            // below what h's rounding can show.
-            if (s.d2 > 0.0 && s.d1 * s.d1 < 2e-14 * s.d2 * (1.0 + std::abs(s.h))) break;
+            // Where h is convex, Newton's step gains about d1^2 / (2 d2). Stop when that is
+            // below 1e-10 voxel (a float distance of a few voxels holds about 2e-7).
+            if (s.d2 > 0.0 && s.d1 * s.d1 < 2e-10 * s.d2 * (1.0 + std::abs(s.h))) break;
+            // Below kAcceptGain, take the step's predicted least without evaluating h there:
+            // h is quadratic that close (its error is third order in the step, ~1e-10 times
+            // the gain), and the evaluation would only confirm it.
+            if (s.d2 > 0.0 && s.d1 * s.d1 < 2.0 * kAcceptGain * s.d2 * (1.0 + std::abs(s.h))) {
+                const double t = std::max(lo, std::min(hi, s.t + step));
+                if (t == s.t + step) {
+                    s.h += s.d1 * step + 0.5 * s.d2 * step * step;
+                    s.t = t;
+                    s.w = weightAt(t);
+                    s.d1 = 0.0;
+                    break;
+                }
+            }
             step = std::max(-maxStep, std::min(maxStep, step));
             bool moved = false;
             for (int half = 0; half < 30; ++half, step *= 0.5) {
@@ -119,6 +135,14 @@ public:
     }
 
 private:
+    /// The weight w at the iteration's variable @a t.
+    double weightAt(double t) const
+    {
+        if (mK.polynomial) return t;
+        const double e = implicit::detail::expNonPositive(-std::abs(t)), r = 1.0 / (1.0 + e);
+        return t >= 0.0 ? r : e * r;
+    }
+
     UnionKernel mK;
     double mInvP; // 1 / p (super-elliptic)
     double mA, mB, mC;
