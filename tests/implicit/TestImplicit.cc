@@ -636,6 +636,107 @@ TEST_F(TestImplicit, ValuesAndFootPointsMatchTheTwoCallsBitForBit)
     }
 }
 
+TEST_F(TestImplicit, LipschitzNodesCertifyFarPointsFromTheirValue)
+{
+    // A blend of exact SDFs and a non-uniform scale of one are 1-Lipschitz, so where |f| >= far
+    // a point is at least |f| from the surface and footPoints() certifies it from the value
+    // alone (the rasterizer then only needs "farther than the band"). Checked independently:
+    // the field is 1-Lipschitz on random pairs; no sign change lies within |f| of such a point,
+    // along 32 rays from it; and every nearer certified distance is the
+    // generic smooth iteration's (Implicit::footPoints: no lead rule, no Lipschitz bound)
+    // within 1e-5, where that certifies the point too.
+    const Ptr a = std::make_shared<Sphere>(Vec3d(-0.35, 0.0, 0.0), 0.6),
+              b = std::make_shared<Sphere>(Vec3d(0.35, 0.1, 0.0), 0.6),
+              c = std::make_shared<Box>(Vec3d(0.0, 0.3, 0.2), Vec3d(0.5, 0.7, 0.9));
+    std::vector<std::pair<std::string, Ptr>> nodes;
+    for (auto op : {Csg::Op::Union, Csg::Op::Intersection, Csg::Op::Difference}) {
+        for (const BlendKernel& kernel :
+             {BlendKernel::superElliptic(1.0), BlendKernel::superElliptic(4.0),
+              BlendKernel::superElliptic(50.0), BlendKernel::polynomial(0.1),
+              BlendKernel::polynomial(0.5)}) {
+            const auto node = std::make_shared<Blend>(op, kernel, std::vector<Ptr>{a, b, c});
+            nodes.push_back({node->typeName() + " " + kernel.describe(), node});
+        }
+    }
+    nodes.push_back({"scaled sphere", std::make_shared<Transform>(a, Vec3d(0.1, 0, 0), Vec3d(10, 20, 30),
+                                                                  Vec3d(1.4, 0.6, 1.0))});
+    nodes.push_back({"scaled box", std::make_shared<Transform>(c, Vec3d(0, -0.1, 0), Vec3d(-30, 5, 60),
+                                                               Vec3d(0.7, 1.3, 1.1))});
+    FootQuery query;
+    query.tolerance = 1e-6;
+    query.far = 0.15;
+    const std::size_t n = kMaxBatch;
+    std::vector<double> x(n), y(n), z(n), v(n);
+    auto feet = std::make_unique<FootPoints>(), ref = std::make_unique<FootPoints>();
+    std::normal_distribution<double> normal(0.0, 1.0);
+    auto direction = [&] {
+        Vec3d d(normal(rng), normal(rng), normal(rng));
+        while (d.length() < 1e-6) d = Vec3d(normal(rng), normal(rng), normal(rng));
+        return d / d.length();
+    };
+    std::vector<Vec3d> dirs;
+    for (int k = 0; k < 32; ++k) dirs.push_back(direction());
+    int near = 0; // over all nodes: some blends of small p leave little or no surface
+    for (const auto& [what, f] : nodes) {
+        double worstRatio = 0.0;
+        for (int i = 0; i < 2000; ++i) {
+            const Vec3d p(uniform(-1.6, 1.6), uniform(-1.6, 1.6), uniform(-1.6, 1.6));
+            const Vec3d q = p + direction() * uniform(1e-3, 0.3);
+            worstRatio = std::max(worstRatio, std::abs(f->value(q) - f->value(p)) / (q - p).length());
+        }
+        EXPECT_LE(worstRatio, 1.0 + 1e-9) << what;
+        int far = 0;
+        for (int batch = 0; batch < 4; ++batch) {
+            // Half the points anywhere, half within about far of the surface (a random point's
+            // first-order projection, moved along the normal).
+            for (std::size_t i = 0; i < n; ++i) {
+                Vec3d p(uniform(-1.6, 1.6), uniform(-1.6, 1.6), uniform(-1.6, 1.6));
+                const Vec3d g = f->gradient(p);
+                if (i % 2 && g.lengthSqr() > 0.01) {
+                    p -= g * (f->value(p) / g.lengthSqr());
+                    p += g * (uniform(-1.0, 1.0) * query.far / g.length());
+                }
+                x[i] = p[0], y[i] = p[1], z[i] = p[2];
+            }
+            f->values(x.data(), y.data(), z.data(), v.data(), n);
+            f->footPoints(x.data(), y.data(), z.data(), v.data(), n, query, *feet);
+            f->Implicit::footPoints(x.data(), y.data(), z.data(), v.data(), n, query, *ref);
+            for (std::size_t i = 0; i < n; ++i) {
+                const double d = feet->distance[i];
+                if (std::abs(v[i]) >= query.far) {
+                    ASSERT_TRUE(feet->ok[i]) << what << " f=" << v[i];
+                }
+                if (!feet->ok[i]) continue;
+                ASSERT_EQ(d > 0.0, v[i] > 0.0) << what;
+                if (std::abs(d) < query.far) {
+                    // Where the generic iteration certifies the point too (it stops short of
+                    // some near the box's edges, where the lead rule does not).
+                    if (!ref->ok[i]) continue;
+                    ++near;
+                    ASSERT_NEAR(d, ref->distance[i], 1e-5) << what << " f=" << v[i];
+                    continue;
+                }
+                // Reported as far from |f| >= far: no surface within |f| (the Lipschitz
+                // bound), short of it by twice the tolerance, which a led distance may have.
+                // (The others reported as far are local answers of the iteration, which near a
+                // medial axis can miss a nearer part of the surface.)
+                if (std::abs(v[i]) < query.far) continue;
+                ++far;
+                const Vec3d p(x[i], y[i], z[i]);
+                const double reach = std::abs(v[i]) - 2.0 * query.tolerance;
+                for (const Vec3d& dir : dirs) {
+                    for (int s = 1; s <= 16; ++s) {
+                        ASSERT_EQ(f->value(p + dir * (reach * s / 16.0)) > 0.0, v[i] > 0.0)
+                            << what << ": a sign change within " << reach << " of " << p;
+                    }
+                }
+            }
+        }
+        EXPECT_GE(far, 100) << what;
+    }
+    EXPECT_GE(near, 1000);
+}
+
 TEST_F(TestImplicit, IntervalContainsValues)
 {
     // Intervals are not outward-rounded (documented), so allow rounding slack of 1e-12 relative.

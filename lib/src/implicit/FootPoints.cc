@@ -741,7 +741,19 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
 {
     if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2])) {
         // A non-uniform scale is not a rigid motion: the field itself, by the smooth iteration.
-        Implicit::footPoints(x, y, z, values, n, query, out);
+        // Of an exact SDF the field min(scale) child(q) is 1-Lipschitz (q moves by at most
+        // 1 / min(scale) per unit of p), so |f| never exceeds the distance: a point with
+        // |f| >= far is that far at least, which is all that is asked there.
+        if (!mChild->isExactSdf()) {
+            Implicit::footPoints(x, y, z, values, n, query, out);
+            return;
+        }
+        for (std::size_t i = 0; i < n; ++i) {
+            out.ok[i] = std::abs(values[i]) >= query.far;
+            out.distance[i] = values[i];
+            out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
+        }
+        detail::iterateUncertified(*this, x, y, z, values, n, query, out);
         return;
     }
     // Rigid motion and uniform scale: the child's foot points, mapped.
@@ -912,7 +924,10 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
 {
     // Where the deciding child (of exact SDFs) leads the next by more than the blend's reach
     // and swell, the blend is that child within the tolerance, and so is its distance (the
-    // lead rule); elsewhere, the smooth iteration on the blended field.
+    // lead rule). A blend of exact SDFs is 1-Lipschitz (its gradient is a convex combination
+    // of the children's unit gradients, each signed), so |f| never exceeds the distance: where
+    // |f| >= far, the point is that far at least, which is all that is asked there. Elsewhere,
+    // the smooth iteration on the blended field.
     const std::size_t nc = mChildren.size();
     auto termSign = [this](std::size_t c) {
         return mOp == Op::Union ? 1.0 : mOp == Op::Intersection ? -1.0 : (c == 0 ? -1.0 : 1.0);
@@ -920,6 +935,7 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
     const double lead = mKernel.reach(query.tolerance) + mKernel.swell(nc);
     std::size_t decider[kMaxBatch];
+    bool led[kMaxBatch];
     bool anyBlended = false;
     for (std::size_t i = 0; i < n; ++i) {
         double first = std::numeric_limits<double>::max(), second = first;
@@ -928,14 +944,15 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
             if (u < first) second = first, first = u, decider[i] = c;
             else if (u < second) second = u;
         }
-        out.ok[i] = leadKeepsDistance(first, second, lead);
+        led[i] = leadKeepsDistance(first, second, lead);
+        out.ok[i] = led[i] || std::abs(values[i]) >= query.far;
         anyBlended = anyBlended || !out.ok[i];
-        out.distance[i] = rho * first;
+        out.distance[i] = led[i] ? rho * first : values[i];
         out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
     }
     if (query.feet) {
         for (std::size_t i = 0; i < n; ++i) {
-            if (!out.ok[i]) continue;
+            if (!led[i]) continue; // the far points need no foot point
             // The deciding child's own gradient, a unit vector for an exact SDF.
             const double* g = cg + 3 * decider[i] * n;
             const Vec3d grad(g[i], g[n + i], g[2 * n + i]);

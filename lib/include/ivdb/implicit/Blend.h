@@ -89,8 +89,9 @@ public:
     void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
                             double* gx, double* gy, double* gz, std::size_t n) const override;
     /// Exact SDF children: where the deciding child leads the next by the kernel's reach and
-    /// swell (the lead rule, docs/method.md#true-distances), its distance and foot point; the
-    /// smooth iteration elsewhere.
+    /// swell (the lead rule, docs/method.md#true-distances), its distance and foot point; where
+    /// |f| >= far, that (the blend is 1-Lipschitz, so the distance is at least |f|); the smooth
+    /// iteration elsewhere.
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     /// The children evaluated once for the values, the lead rule and the smooth iteration's

@@ -79,7 +79,8 @@ public:
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
     /// Rigid motion and uniform scale: the child's foot points mapped back; a non-uniform scale
-    /// iterates on this node's own field.
+    /// iterates on this node's own field (of an exact SDF, only where |f| < far: the field is
+    /// 1-Lipschitz, so |f| >= far is far enough).
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
