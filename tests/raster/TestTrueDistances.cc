@@ -258,6 +258,44 @@ TEST_F(TestTrueDistances, EllipsoidIsTheDistanceToItsSurface)
     }
 }
 
+TEST_F(TestTrueDistances, NonUniformScaleOfASphereOrAQuadricIsAnEllipsoid)
+{
+    // Rotated, translated and scaled non-uniformly, a sphere and an ellipsoid quadric are
+    // ellipsoids: the transform answers with the world quadric's foot points (every voxel local,
+    // as the ellipsoid itself), checked against the bisection in the ellipsoid's own frame.
+    const double dx = 0.01;
+    const Vec3d scale(1.5, 1.0, 0.75), sphereCentre(0.05, -0.02, 0.03), quadricCentre(0.02, 0.0, -0.03);
+    const Vec3d quadricRadii(0.24, 0.3, 0.2);
+    struct Case { std::string what; implicit::Implicit::Ptr child; Vec3d centre, radii; };
+    const std::vector<Case> cases = {
+        {"scaled sphere", std::make_shared<implicit::Sphere>(sphereCentre, 0.3), sphereCentre, Vec3d(0.3)},
+        {"scaled ellipsoid", implicit::makeEllipsoid(quadricCentre, quadricRadii), quadricCentre,
+         quadricRadii}};
+    for (const Case& c : cases) {
+        const auto shape = std::make_shared<implicit::Transform>(c.child, Vec3d(0.1, -0.05, 0.02),
+                                                                 Vec3d(20.0, -35.0, 50.0), scale);
+        // The ellipsoid's frame: S (q - c) for the child's point q, a rigid motion of the world.
+        const Vec3d semi(c.radii[0] * scale[0], c.radii[1] * scale[1], c.radii[2] * scale[2]);
+        auto reference = [&](const Vec3d& p) {
+            const Vec3d q = shape->toLocal(p) - c.centre;
+            return ellipsoidDistance(semi, Vec3d(q[0] * scale[0], q[1] * scale[1], q[2] * scale[2]));
+        };
+        raster::RasterStats stats;
+        raster::RasterSettings s = settings(dx);
+        s.stats = &stats;
+        const auto g = raster::rasterize(shape, s);
+        const double worst = expectDistances(*g, reference, dx, 3.0, 1e-6, c.what,
+                                             implicit::BBoxd(Vec3d(-0.65), Vec3d(0.65)));
+        std::printf("%s: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n",
+                    c.what.c_str(), worst, (unsigned long long)stats.localDistances,
+                    (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
+                    (unsigned long long)stats.sweptDistances);
+        EXPECT_GT(stats.localDistances, 0u) << c.what;
+        EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u)
+            << c.what;
+    }
+}
+
 TEST_F(TestTrueDistances, NonUniformScaleAndBlendAreDistances)
 {
     // A sphere scaled by (1.5, 1, 0.75) is the ellipsoid with those semi-axes: the transform's

@@ -6,6 +6,7 @@
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Modifiers.h>
 #include <ivdb/implicit/Primitives.h>
+#include <ivdb/implicit/Quadric.h>
 
 #include "../util/Simd.h"
 #include "Feet.h"
@@ -739,6 +740,22 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
                            const double* values, std::size_t n, const FootQuery& query,
                            FootPoints& out) const
 {
+    if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2]) && mQuadric) {
+        // A non-uniform scale of a sphere or a quadric: the world quadric's foot points, from
+        // its own values. Of a sphere (an exact SDF), a point the quadric leaves uncertified (a
+        // degenerate foot point deep inside) with |f| >= far is that far at least, as below.
+        double qv[kMaxBatch];
+        mQuadric->values(x, y, z, qv, n);
+        mQuadric->footPoints(x, y, z, qv, n, query, out);
+        if (!mChild->isExactSdf()) return;
+        for (std::size_t i = 0; i < n; ++i) {
+            if (out.ok[i] || std::abs(values[i]) < query.far) continue;
+            out.ok[i] = true;
+            out.distance[i] = values[i];
+            out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
+        }
+        return;
+    }
     if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2])) {
         // A non-uniform scale is not a rigid motion: the field itself, by the smooth iteration.
         // Of an exact SDF the field min(scale) child(q) is 1-Lipschitz (q moves by at most

@@ -1,5 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/Primitives.h>
+#include <ivdb/implicit/Quadric.h>
 
 #include <openvdb/Exceptions.h>
 
@@ -35,6 +37,7 @@ Transform::Transform(Ptr child, const Vec3d& translate, const Vec3d& rotateDeg,
         {-sy, cy * sx, cy * cx}};
     std::copy(&r[0][0], &r[0][0] + 9, &mRot[0][0]);
     mValueScale = std::min(scale[0], std::min(scale[1], scale[2]));
+    prepareQuadric();
 }
 
 Transform::Transform(Ptr child, const Transform& like)
@@ -42,6 +45,52 @@ Transform::Transform(Ptr child, const Transform& like)
       mValueScale(like.mValueScale)
 {
     std::copy(&like.mRot[0][0], &like.mRot[0][0] + 9, &mRot[0][0]);
+    prepareQuadric();
+}
+
+void Transform::prepareQuadric()
+{
+    // A rigid motion and uniform scale maps the child's own foot points (footPoints()); only a
+    // non-uniform scale needs another route.
+    if (mScale[0] == mScale[1] && mScale[1] == mScale[2]) return;
+    Mat4 local;
+    if (const auto* s = dynamic_cast<const Sphere*>(mChild.get())) {
+        // |q - c|^2 - r^2: the same surface and sign as the sphere's distance.
+        const Vec3d& c = s->center();
+        const double r = s->radius();
+        local = {{{1.0, 0.0, 0.0, -c[0]},
+                  {0.0, 1.0, 0.0, -c[1]},
+                  {0.0, 0.0, 1.0, -c[2]},
+                  {-c[0], -c[1], -c[2], c.dot(c) - r * r}}};
+    } else if (const auto* q = dynamic_cast<const Quadric*>(mChild.get())) {
+        local = q->matrix();
+    } else {
+        return;
+    }
+    // [q 1] = M [p 1] with M = [[S^-1 R^T, -S^-1 R^T t], [0 0 0 1]], so the world quadric is
+    // M^T Q M (symmetrized: the products round differently on either side of the diagonal).
+    double m[4][4] = {};
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) m[i][j] = mRot[j][i] / mScale[i];
+        m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
+    }
+    m[3][3] = 1.0;
+    double qm[4][4] = {}; // Q M
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) qm[i][j] += local[i][k] * m[k][j];
+    Mat4 world{};
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) world[i][j] += m[k][i] * qm[k][j];
+    for (int i = 0; i < 4; ++i) {
+        for (int j = i + 1; j < 4; ++j) world[i][j] = world[j][i] = 0.5 * (world[i][j] + world[j][i]);
+    }
+    try {
+        mQuadric = std::make_shared<Quadric>(world);
+    } catch (const openvdb::ValueError&) {
+        // Not a usable quadric (an overflow, say): the smooth iteration instead.
+    }
 }
 
 Vec3d Transform::toLocal(const Vec3d& p) const
@@ -122,6 +171,38 @@ Interval Transform::interval(const BBoxd& box) const
     const BBoxd local = mapBox(box, [this](const Vec3d& p) { return toLocal(p); });
     return mChild->interval(local) * mValueScale;
 }
+
+// GCC cannot see that the child reads only the n entries written below.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+void Transform::intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                          std::size_t n, double* lo, double* hi) const
+{
+    // The image of a box centre c +/- h under q = S^-1 R^T (p - t) lies in the box
+    // q(c) +/- |S^-1 R^T| h, the box interval() maps its corners to.
+    Vec3d localHalf;
+    for (int i = 0; i < 3; ++i) {
+        localHalf[i] = (std::abs(mRot[0][i]) * half[0] + std::abs(mRot[1][i]) * half[1] +
+                        std::abs(mRot[2][i]) * half[2]) / mScale[i];
+    }
+    double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d q = toLocal(Vec3d(cx[i], cy[i], cz[i]));
+        qx[i] = q[0];
+        qy[i] = q[1];
+        qz[i] = q[2];
+    }
+    mChild->intervals(qx, qy, qz, localHalf, n, lo, hi);
+    for (std::size_t i = 0; i < n; ++i) {
+        lo[i] *= mValueScale;
+        hi[i] *= mValueScale;
+    }
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 BBoxd Transform::boundingBox() const
 {

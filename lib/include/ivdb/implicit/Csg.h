@@ -78,12 +78,17 @@ public:
     Vec3d gradient(const Vec3d& p) const override;
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
-    /// Rigid motion and uniform scale: the child's foot points mapped back; a non-uniform scale
-    /// iterates on this node's own field (of an exact SDF, only where |f| < far: the field is
-    /// 1-Lipschitz, so |f| >= far is far enough).
+    /// Rigid motion and uniform scale: the child's foot points mapped back. A non-uniform scale
+    /// of a sphere or a quadric is a quadric: its foot points (Quadric::footPoints); of any
+    /// other child, the smooth iteration on this node's own field (of an exact SDF, only where
+    /// |f| < far: the field is 1-Lipschitz, so |f| >= far is far enough).
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
+    /// The child's intervals over the boxes' images (one size: the centres mapped, the half
+    /// sizes through |S^-1 R^T|), in one batch.
+    void intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
+                   std::size_t n, double* lo, double* hi) const override;
     BBoxd boundingBox() const override;
     bool isExactSdf() const override;
     bool isExactOutside() const override;
@@ -97,11 +102,16 @@ public:
 
 private:
     Transform(Ptr child, const Transform& like);
+    /// mQuadric, where the child is a sphere or a quadric and the scale is not uniform.
+    void prepareQuadric();
 
     Ptr mChild;
     Vec3d mTranslate, mScale;
     double mRot[3][3];   // R, row-major
     double mValueScale;  // min(scale)
+    /// The same surface as a world-space Quadric, for footPoints() (called as an Implicit:
+    /// Quadric's batch functions are target clones); null unless prepareQuadric() made one.
+    Ptr mQuadric;
 };
 
 } // namespace ivdb::implicit
