@@ -18,7 +18,8 @@ Section "diff" (gradient and mean curvature of the radius-400 sphere):
   * end to end: `ivdb gradient|curvature IN -o OUT` vs `vdb_tool -read IN -grad|-curvature -write OUT`.
 Section "distances" (true distances of shapes that are not exact SDFs, docs/method.md):
   * compute and peak memory of `ivdb rasterize` (its own compute figure, median of interleaved
-    runs) for a sphere, the same sphere as a quadric, an ellipsoid, the union and the blend of two
+    runs) for a sphere, the same sphere as a quadric, an ellipsoid (as a quadric and as a scaled
+    sphere), the union and the blend of two
     spheres and a union of 1000 spheres, each CSG scene in both distance modes, per active voxel
     against the exact sphere; OpenVDB's route (createLevelSetSphere per sphere + csgUnion) for the
     unions, measured by `ivdb bench-run` in the same run.
@@ -546,6 +547,8 @@ def bench_distances(tmp, reps, quick):
         ("sphere as a quadric", {"type": "quadric", "matrix": [[1, 0, 0, 0], [0, 1, 0, 0],
                                  [0, 0, 1, 0], [0, 0, 0, -1]]}, 0.01, None, False),
         ("ellipsoid radii 1, 0.8, 0.6", {"type": "ellipsoid", "radii": [1, 0.8, 0.6]}, 0.0025, None, False),
+        ("sphere radius 1 scaled 1, 0.8, 0.6 (the same ellipsoid)",
+         {"type": "transform", "scale": [1, 0.8, 0.6], "child": sph([0, 0, 0], 1)}, 0.0025, None, False),
         ("union of two spheres", {"type": "union", "children": two}, 0.0025, None, True),
         ("union of two spheres, bound", {"type": "union", "children": two}, 0.0025, "bound", True),
         ("blend of two spheres, p = 20", {"type": "blend", "op": "union", "p": 20, "children": two},

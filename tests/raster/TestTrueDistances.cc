@@ -5,6 +5,7 @@
 // steps), and how the distances were found.
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/Modifiers.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
 #include <ivdb/raster/Rasterize.h>
@@ -299,10 +300,13 @@ TEST_F(TestTrueDistances, NonUniformScaleOfASphereOrAQuadricIsAnEllipsoid)
 TEST_F(TestTrueDistances, NonUniformScaleAndBlendAreDistances)
 {
     // A sphere scaled by (1.5, 1, 0.75) is the ellipsoid with those semi-axes: the transform's
-    // own field (not a distance) must give the ellipsoid's distances.
+    // own field (not a distance) must give the ellipsoid's distances. The sphere is an offset
+    // one (radius 0.25 grown by 0.05), which the transform does not take for a quadric: this
+    // checks the smooth iteration.
     const double dx = 0.01;
     const Vec3d e(0.45, 0.3, 0.225);
-    auto sphere = std::make_shared<implicit::Sphere>(Vec3d(0.0), 0.3);
+    auto sphere = std::make_shared<implicit::Offset>(std::make_shared<implicit::Sphere>(Vec3d(0.0), 0.25),
+                                                     0.05);
     auto scaled = std::make_shared<implicit::Transform>(sphere, Vec3d(0.0), Vec3d(0.0),
                                                         Vec3d(1.5, 1.0, 0.75));
     const auto g = raster::rasterize(scaled, settings(dx));
