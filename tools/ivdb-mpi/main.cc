@@ -399,6 +399,7 @@ void addBlendMpi(CLI::App& app, Action& action)
 
 int main(int argc, char** argv)
 {
+    ivdb::cli::restartWithHugePages(argv);
     int provided = 0;
     MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
     if (provided < MPI_THREAD_FUNNELED) {
