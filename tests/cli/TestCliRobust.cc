@@ -444,6 +444,90 @@ TEST_F(TestCliRobust, SignalsStopRunsAndLeaveNoPartialOutput)
     EXPECT_TRUE(f.readGrid("gradient")->activeVoxelCount() > 100000);
 }
 
+/// The environment of running process @a pid, one "NAME=value" per entry.
+std::vector<std::string> environmentOf(pid_t pid)
+{
+    std::ifstream in("/proc/" + std::to_string(pid) + "/environ");
+    std::vector<std::string> out;
+    std::string entry;
+    while (std::getline(in, entry, '\0')) out.push_back(entry);
+    return out;
+}
+
+/// A /proc/PID/smaps_rollup field in kB (AnonHugePages, say); -1 if it cannot be read.
+long smapsKb(pid_t pid, const std::string& field)
+{
+    std::ifstream in("/proc/" + std::to_string(pid) + "/smaps_rollup");
+    std::string line;
+    while (std::getline(in, line)) {
+        if (line.rfind(field + ":", 0) == 0) return std::stol(line.substr(field.size() + 1));
+    }
+    return -1;
+}
+
+// docs/performance.md#huge-pages: ivdb restarts itself once (same pid) with glibc's malloc asking
+// for transparent huge pages where the kernel's THP mode is "madvise"; IVDB_HUGEPAGES=0 keeps it
+// from doing so, and the user's own GLIBC_TUNABLES are kept. Checked on the running process, held
+// in its output's write (tests/faults/WriteFaults.cc, "pause").
+TEST_F(TestCliRobust, RestartsOnceWithHugePages)
+{
+    using ivdb::test::spawnIvdb;
+    using ivdb::test::waitIvdb;
+    std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
+    std::string modes;
+    std::getline(thp, modes);
+    const bool madvise = modes.find("[madvise]") != std::string::npos;
+    write("big.json", R"({"voxel_size": 0.004, "shape": {"type": "sphere", "radius": 1}})");
+    ASSERT_EQ(run({"rasterize", "big.json", "-o", "big.vdb", "-q"}).exitCode, 0);
+    const fs::path mark = fs::temp_directory_path() / ("ivdb-write-mark-" + std::to_string(::getpid()));
+    struct Case { std::vector<std::pair<std::string, std::string>> env; std::string expect; };
+    const std::vector<Case> cases{
+        {{}, madvise ? "GLIBC_TUNABLES=glibc.malloc.hugetlb=1" : ""},
+        {{{"IVDB_HUGEPAGES", "0"}}, ""},
+        {{{"GLIBC_TUNABLES", "glibc.malloc.check=0"}},
+         madvise ? "GLIBC_TUNABLES=glibc.malloc.check=0:glibc.malloc.hugetlb=1"
+                 : "GLIBC_TUNABLES=glibc.malloc.check=0"},
+        {{{"GLIBC_TUNABLES", "glibc.malloc.hugetlb=0"}}, "GLIBC_TUNABLES=glibc.malloc.hugetlb=0"}};
+    for (const Case& c : cases) {
+        fs::remove(mark);
+        auto env = c.env;
+        env.push_back({"LD_PRELOAD", IVDB_WRITE_FAULTS});
+        env.push_back({"IVDB_FAULT", "pause"});
+        env.push_back({"IVDB_FAULT_MARK", mark.string()});
+        std::string what = "env";
+        for (const auto& [name, value] : c.env) what += " " + name + "=" + value;
+        const pid_t pid = spawnIvdb(mDir, {"gradient", "big.vdb", "-o", "out.vdb"}, env);
+        for (int i = 0; i < 60000 * kSlowdown && !fs::exists(mark); ++i) ::usleep(1000);
+        ASSERT_TRUE(fs::exists(mark)) << what << ": the run never wrote its output";
+        // glibc before 2.39 ends each tunable's value in place with a NUL as it parses
+        // GLIBC_TUNABLES, so /proc shows "a=1:b=2" as the entries "GLIBC_TUNABLES=a=1" and
+        // "b=2": the entries that follow it and name a glibc tunable are joined back.
+        std::string tunables;
+        const std::vector<std::string> environ = environmentOf(pid);
+        for (std::size_t i = 0; i < environ.size(); ++i) {
+            if (environ[i].rfind("GLIBC_TUNABLES=", 0) != 0) continue;
+            tunables = environ[i];
+            while (i + 1 < environ.size() && environ[i + 1].rfind("glibc.", 0) == 0) {
+                tunables += ":" + environ[++i];
+            }
+        }
+        EXPECT_EQ(tunables, c.expect) << what;
+#ifndef IVDB_SANITIZED // the sanitizers' allocators do not read glibc's tunables
+        // The grid (about 60 MB) sits in huge pages where malloc asked for them, and in none
+        // where it did not.
+        const long huge = smapsKb(pid, "AnonHugePages");
+        if (c.expect.find("hugetlb=1") != std::string::npos) {
+            EXPECT_GE(huge, 2048) << what;
+        } else if (madvise) {
+            EXPECT_EQ(huge, 0) << what;
+        }
+#endif
+        ::kill(pid, SIGKILL);
+        EXPECT_EQ(waitIvdb(pid, 20.0 * kSlowdown), 128 + SIGKILL) << what;
+    }
+    fs::remove(mark);
+}
+
 // Degenerate quadrics and shapes with no surface in the bounds: a clear error, no empty grid.
 TEST_F(TestCliRobust, DegenerateShapesAreRefused)
 {
