@@ -47,7 +47,11 @@ Section "mpi" (ivdb-mpi, issue 16):
 Section "mpi-blend": `ivdb blend union -p 1000` and `mpirun -np N ivdb-mpi blend union -p 1000` of
   the "csg" section's two radius-400 spheres: read, blend, write and total time and the largest
   peak memory of a rank, interleaved.
-Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|io|mesh|sequence|mpi|mpi-blend|all]
+Section "hugepages" (ivdb's restart with transparent huge pages, docs/performance.md#huge-pages):
+  `ivdb rasterize` of the radius-400 sphere and `ivdb gradient` of its file, by default and with
+  IVDB_HUGEPAGES=0, and `vdb_tool -sphere ... -write` with and without
+  GLIBC_TUNABLES=glibc.malloc.hugetlb=1, interleaved: each one's own figures and peak memory.
+Prints Markdown tables. Usage: scripts/bench.py [--section core|csg|diff|distances|hugepages|io|mesh|sequence|mpi|mpi-blend|all]
 [--reps N] [--quick]
 """
 import argparse
@@ -108,7 +112,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, fewer repetitions")
-    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "io", "mesh", "sequence", "mpi",
+    ap.add_argument("--section", choices=["core", "csg", "diff", "distances", "hugepages", "io", "mesh",
+                                          "sequence", "mpi",
                                           "mpi-blend", "all"],
                     default="all")
     args = ap.parse_args()
@@ -125,6 +130,8 @@ def main():
             bench_core(tmp, big, reps, args.quick)
         if args.section in ("distances", "all"):
             bench_distances(tmp, reps, args.quick)
+        if args.section in ("hugepages", "all"):
+            bench_hugepages(tmp, big, reps)
         if args.section in ("io", "all"):
             bench_io(tmp, big, reps, args.quick)
         if args.section in ("mesh", "all"):
@@ -612,6 +619,61 @@ def bench_distances(tmp, reps, quick):
         print(f"| {name} | {active / 1e6:.2f} M | {t:.3f} s | {t / active / base[dx]:.1f}x "
               f"| {t / active / base[rows[0][2]]:.1f}x | {mb(rpeak - work)} + {mb(work)} "
               f"({work / gridBytes:.2f}x) | {peak} ({grid}) | {ovdb} |")
+    print()
+
+
+def bench_hugepages(tmp, big, reps):
+    scene = sphere_scene(tmp, big)
+    src = os.path.join(tmp, "hp_in.vdb")
+    run([IVDB, "rasterize", scene, "-o", src, "-q"])
+    out = os.path.join(tmp, "hp_out.vdb")
+    base = {k: v for k, v in os.environ.items() if k not in ("GLIBC_TUNABLES", "IVDB_HUGEPAGES")}
+    ivdb_env = {"huge pages (default)": base, "IVDB_HUGEPAGES=0": dict(base, IVDB_HUGEPAGES="0")}
+    tool_env = {"huge pages (default)": dict(base, GLIBC_TUNABLES="glibc.malloc.hugetlb=1"),
+                "IVDB_HUGEPAGES=0": base}
+    figures = {k: {} for k in ivdb_env}
+
+    def timed(cmd, env):
+        if os.path.exists(out):
+            os.remove(out)  # no run pays for unlinking the previous one's output
+        os.sync()
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        text = proc.stdout.read() + proc.stderr.read()
+        if os.waitstatus_to_exitcode(status) != 0:
+            sys.exit(f"failed: {' '.join(cmd)}\n{text}")
+        return wall, usage.ru_maxrss / 1024.0, text
+
+    def add(mode, name, value):
+        figures[mode].setdefault(name, []).append(value)
+
+    for _ in range(reps):
+        for mode in ivdb_env:
+            wall, peak, text = timed([IVDB, "rasterize", scene, "-o", out], ivdb_env[mode])
+            add(mode, "ivdb rasterize: compute", summary_seconds(text, "compute"))
+            add(mode, "ivdb rasterize: wall", wall)
+            add(mode, "ivdb rasterize: peak memory (MB)", peak)
+            wall, peak, text = timed([IVDB, "gradient", src, "-o", out], ivdb_env[mode])
+            add(mode, "ivdb gradient: read", summary_seconds(text, "read"))
+            add(mode, "ivdb gradient: compute", summary_seconds(text, "compute"))
+            add(mode, "ivdb gradient: wall", wall)
+            add(mode, "ivdb gradient: peak memory (MB)", peak)
+            wall, peak, _ = timed(["vdb_tool", "-sphere", f"voxel={1.0 / big}", "radius=1", "-write", out],
+                                  tool_env[mode])
+            add(mode, "vdb_tool -sphere -write: wall", wall)
+            add(mode, "vdb_tool -sphere -write: peak memory (MB)", peak)
+    modes = list(ivdb_env)
+    print(f"| radius-{big} sphere, medians of {reps} interleaved runs | huge pages (ivdb's default; vdb_tool "
+          "with GLIBC_TUNABLES=glibc.malloc.hugetlb=1) | without (IVDB_HUGEPAGES=0; vdb_tool as it is) "
+          "| with / without |")
+    print("|---|---|---|---|")
+    for name in figures[modes[0]]:
+        a, b = (statistics.median(figures[m][name]) for m in modes)
+        unit = "" if "MB" in name else " s"
+        fmt = (lambda v: f"{v:.0f}") if "MB" in name else (lambda v: f"{v:.3f}")
+        print(f"| {name} | {fmt(a)}{unit} | {fmt(b)}{unit} | {a / b:.2f} |")
     print()
 
 

@@ -42,7 +42,11 @@ if "$exe" "$work/bad.json" "$work/bad.vdb" 2>"$work/bad.err"; then echo "a bad s
 grep -q "shape.radius" "$work/bad.err" || { echo "the error does not name the field:"; cat "$work/bad.err"; exit 1; }
 [ ! -e "$work/bad.vdb" ] || { echo "a bad scene left a file"; exit 1; }
 
-"$ivdb" rasterize "$scene" -o "$work/cli.vdb" -q
+# The installed command (its launcher, bin/ivdb, runs libexec/ivdb/ivdb), then the build's.
+"$work/prefix/bin/ivdb" rasterize "$scene" -o "$work/cli.vdb" -q
+"$ivdb" rasterize "$scene" -o "$work/cli_build.vdb" -q
+cmp -s <(tail -c +58 "$work/cli.vdb") <(tail -c +58 "$work/cli_build.vdb") ||
+  { echo "the installed ivdb and the build's wrote different files"; exit 1; }
 /usr/bin/python3 - "$work/example.vdb" "$work/cli.vdb" <<'PY'
 import sys
 import pyopenvdb as vdb

@@ -2,6 +2,7 @@
 // ivdb-mpi: ivdb's commands over MPI ranks (`mpirun -np N ivdb-mpi rasterize ...`), each rank on
 // its share of its machine's cores, writing one .vdb file together. Parsing, printing and error
 // handling are ivdb's (tools/ivdb/Cli.h); only rank 0 prints.
+#include "../HugePages.h"
 #include "../ivdb/Cli.h"
 
 #include <ivdb/io/VdbFile.h>
@@ -19,6 +20,8 @@
 #include <cstdio>
 #include <memory>
 #include <optional>
+
+#include <unistd.h>
 
 namespace ivdb::cli {
 
@@ -399,7 +402,9 @@ void addBlendMpi(CLI::App& app, Action& action)
 
 int main(int argc, char** argv)
 {
-    ivdb::cli::restartWithHugePages(argv);
+    // Transparent huge pages (../HugePages.h): restart once with them, before MPI starts (the
+    // launcher does this for ivdb; ranks are launched by mpirun).
+    if (ivdb::tools::askForHugePages()) execv("/proc/self/exe", argv);
     int provided = 0;
     MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
     if (provided < MPI_THREAD_FUNNELED) {

@@ -16,14 +16,10 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
-#include <cstdlib>
 #include <cstring>
 #include <exception>
-#include <fstream>
 #include <iostream>
-#include <sstream>
 
-#include <gnu/libc-version.h>
 #include <unistd.h>
 
 namespace ivdb::cli {
@@ -435,32 +431,6 @@ int run(int argc, char** argv, const Program& program)
         if (program.printsErrors()) std::cerr << error << "unknown failure" << std::endl;
         return 1;
     }
-}
-
-void restartWithHugePages(char** argv)
-{
-    const char* opt = std::getenv("IVDB_HUGEPAGES");
-    if (opt && std::strcmp(opt, "0") == 0) return;
-    const char* set = std::getenv("GLIBC_TUNABLES");
-    const std::string tunables = set ? set : "";
-    // Already set (by the user, or by this function before the restart: no loop).
-    if (tunables.find("glibc.malloc.hugetlb") != std::string::npos) return;
-    // THP "always" needs nothing, "never" gives nothing; "madvise" needs malloc to ask.
-    std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
-    std::string modes;
-    if (!std::getline(thp, modes) || modes.find("[madvise]") == std::string::npos) return;
-    // glibc.malloc.hugetlb came with glibc 2.35 (older ones ignore it: no use restarting).
-    int major = 0, minor = 0;
-    std::istringstream version(gnu_get_libc_version());
-    char dot = 0;
-    if (!(version >> major >> dot >> minor) || major < 2 || (major == 2 && minor < 35)) return;
-    const std::string value =
-        (tunables.empty() ? std::string() : tunables + ":") + "glibc.malloc.hugetlb=1";
-    if (setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0) return;
-    execv("/proc/self/exe", argv);
-    // Not restarted (no /proc, say): go on as we are, without the setting.
-    if (set) setenv("GLIBC_TUNABLES", tunables.c_str(), 1);
-    else unsetenv("GLIBC_TUNABLES");
 }
 
 } // namespace ivdb::cli

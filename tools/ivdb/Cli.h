@@ -56,15 +56,6 @@ int run(int argc, char** argv, const Program& program);
 /// @brief The `ivdb` command line (tools/ivdb/main.cc).
 int run(int argc, char** argv);
 
-/// @brief Restart this process (same pid, arguments and environment) with glibc's malloc asking
-/// the kernel for transparent huge pages, where that helps: Linux with THP in "madvise" mode and
-/// glibc 2.35 or later, unless `IVDB_HUGEPAGES=0` or `GLIBC_TUNABLES` already sets
-/// `glibc.malloc.hugetlb`. A grid's memory is touched first in 2 MiB pages instead of 4 KiB ones,
-/// which cuts the page faults that dominate a cold run's reading and rasterizing
-/// (docs/performance.md#huge-pages). Returns (doing nothing) when it does not apply or the
-/// restart fails; call it first thing in main(), before threads or MPI start.
-void restartWithHugePages(char** argv);
-
 /// @brief A subcommand being declared. Options that set a library parameter are declared with
 /// it, so that a ParamError from the library names the option the user typed.
 class Command

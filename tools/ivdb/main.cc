@@ -33,6 +33,5 @@ int run(int argc, char** argv)
 
 int main(int argc, char** argv)
 {
-    ivdb::cli::restartWithHugePages(argv);
     return ivdb::cli::run(argc, argv);
 }
