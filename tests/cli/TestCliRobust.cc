@@ -465,11 +465,11 @@ long smapsKb(pid_t pid, const std::string& field)
     return -1;
 }
 
-// docs/performance.md#huge-pages: ivdb restarts itself once (same pid) with glibc's malloc asking
-// for transparent huge pages where the kernel's THP mode is "madvise"; IVDB_HUGEPAGES=0 keeps it
-// from doing so, and the user's own GLIBC_TUNABLES are kept. Checked on the running process, held
+// docs/performance.md#huge-pages: ivdb (its launcher, bin/ivdb) runs the program (same pid) with
+// glibc's malloc asking for transparent huge pages where the kernel's THP mode is "madvise";
+// IVDB_HUGEPAGES=0 keeps it from doing so, and the user's own GLIBC_TUNABLES are kept. Checked on the running process, held
 // in its output's write (tests/faults/WriteFaults.cc, "pause").
-TEST_F(TestCliRobust, RestartsOnceWithHugePages)
+TEST_F(TestCliRobust, RunsWithHugePages)
 {
     using ivdb::test::spawnIvdb;
     using ivdb::test::waitIvdb;
@@ -526,6 +526,23 @@ TEST_F(TestCliRobust, RestartsOnceWithHugePages)
         EXPECT_EQ(waitIvdb(pid, 20.0 * kSlowdown), 128 + SIGKILL) << what;
     }
     fs::remove(mark);
+}
+
+// The launcher (bin/ivdb) runs ../libexec/ivdb/ivdb; moved away from it, it says so and where.
+TEST_F(TestCliRobust, LauncherWithoutItsProgramSaysWhere)
+{
+    fs::create_directories(mDir / "bin");
+    fs::copy_file(IVDB_BINARY, mDir / "bin" / "ivdb");
+    const std::string cmd = "cd " + mDir.string() + " && bin/ivdb --version >out.txt 2>err.txt";
+    const int status = std::system(cmd.c_str());
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 127);
+    const std::string err = slurpFile(mDir / "err.txt");
+    EXPECT_NE(err.find("ivdb: error: cannot run the ivdb program " +
+                       (mDir / "bin" / ".." / "libexec" / "ivdb" / "ivdb").string()),
+              std::string::npos) << err;
+    EXPECT_NE(err.find("No such file or directory"), std::string::npos) << err;
+    EXPECT_EQ(slurpFile(mDir / "out.txt"), "");
 }
 
 // Degenerate quadrics and shapes with no surface in the bounds: a clear error, no empty grid.
