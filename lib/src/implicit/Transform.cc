@@ -147,6 +147,49 @@ void Transform::values(const double* x, const double* y, const double* z, double
     mChild->values(qx, qy, qz, out, n);
     for (std::size_t i = 0; i < n; ++i) out[i] *= mValueScale;
 }
+
+void Transform::worldGradients(const double* cx, const double* cy, const double* cz, double* gx,
+                               double* gy, double* gz, std::size_t n) const
+{
+    // As gradient(): s R S^-1 grad child, in its order of operations.
+    for (std::size_t i = 0; i < n; ++i) {
+        const double h0 = cx[i] / mScale[0], h1 = cy[i] / mScale[1], h2 = cz[i] / mScale[2];
+        gx[i] = mValueScale * (mRot[0][0] * h0 + mRot[0][1] * h1 + mRot[0][2] * h2);
+        gy[i] = mValueScale * (mRot[1][0] * h0 + mRot[1][1] * h1 + mRot[1][2] * h2);
+        gz[i] = mValueScale * (mRot[2][0] * h0 + mRot[2][1] * h1 + mRot[2][2] * h2);
+    }
+}
+
+void Transform::gradients(const double* x, const double* y, const double* z, double* gx,
+                          double* gy, double* gz, std::size_t n) const
+{
+    double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
+        qx[i] = q[0];
+        qy[i] = q[1];
+        qz[i] = q[2];
+    }
+    // The child's gradients into gx..gz, then mapped in place (each point reads only its own).
+    mChild->gradients(qx, qy, qz, gx, gy, gz, n);
+    worldGradients(gx, gy, gz, gx, gy, gz, n);
+}
+
+void Transform::valuesAndGradients(const double* x, const double* y, const double* z,
+                                   double* out, double* gx, double* gy, double* gz,
+                                   std::size_t n) const
+{
+    double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
+        qx[i] = q[0];
+        qy[i] = q[1];
+        qz[i] = q[2];
+    }
+    mChild->valuesAndGradients(qx, qy, qz, out, gx, gy, gz, n);
+    for (std::size_t i = 0; i < n; ++i) out[i] *= mValueScale;
+    worldGradients(gx, gy, gz, gx, gy, gz, n);
+}
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif

@@ -78,6 +78,12 @@ public:
     Vec3d gradient(const Vec3d& p) const override;
     void values(const double* x, const double* y, const double* z, double* out,
                 std::size_t n) const override;
+    /// The child's batch at the mapped points, its gradients mapped back as gradient() maps
+    /// them (the same bits).
+    void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
+                   double* gz, std::size_t n) const override;
+    void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
+                            double* gx, double* gy, double* gz, std::size_t n) const override;
     /// Rigid motion and uniform scale: the child's foot points mapped back. A non-uniform scale
     /// of a sphere or a quadric is a quadric: its foot points (Quadric::footPoints); of any
     /// other child, the smooth iteration on this node's own field (of an exact SDF, only where
@@ -104,6 +110,9 @@ private:
     Transform(Ptr child, const Transform& like);
     /// mQuadric, where the child is a sphere or a quadric and the scale is not uniform.
     void prepareQuadric();
+    /// World gradients from the child's gradients @a cx, @a cy, @a cz (in place into gx...).
+    void worldGradients(const double* cx, const double* cy, const double* cz, double* gx,
+                        double* gy, double* gz, std::size_t n) const;
 
     Ptr mChild;
     Vec3d mTranslate, mScale;
