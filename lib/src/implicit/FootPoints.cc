@@ -740,13 +740,14 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
                            const double* values, std::size_t n, const FootQuery& query,
                            FootPoints& out) const
 {
-    if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2]) && mQuadric) {
-        // A non-uniform scale of a sphere or a quadric: the world quadric's foot points, from
-        // its own values. Of a sphere (an exact SDF), a point the quadric leaves uncertified (a
-        // degenerate foot point deep inside) with |f| >= far is that far at least, as below.
-        double qv[kMaxBatch];
-        mQuadric->values(x, y, z, qv, n);
-        mQuadric->footPoints(x, y, z, qv, n, query, out);
+    if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2]) && mSurface) {
+        // A non-uniform scale of a sphere, a quadric or a box: the same surface's foot points
+        // (a world quadric's, a rigidly moved box's), from its own values. Of an exact SDF
+        // child, a point that surface leaves uncertified (a degenerate foot point deep inside)
+        // with |f| >= far is that far at least, as below.
+        double sv[kMaxBatch];
+        mSurface->values(x, y, z, sv, n);
+        mSurface->footPoints(x, y, z, sv, n, query, out);
         if (!mChild->isExactSdf()) return;
         for (std::size_t i = 0; i < n; ++i) {
             if (out.ok[i] || std::abs(values[i]) < query.far) continue;

@@ -37,7 +37,7 @@ Transform::Transform(Ptr child, const Vec3d& translate, const Vec3d& rotateDeg,
         {-sy, cy * sx, cy * cx}};
     std::copy(&r[0][0], &r[0][0] + 9, &mRot[0][0]);
     mValueScale = std::min(scale[0], std::min(scale[1], scale[2]));
-    prepareQuadric();
+    prepareSurface();
 }
 
 Transform::Transform(Ptr child, const Transform& like)
@@ -45,14 +45,33 @@ Transform::Transform(Ptr child, const Transform& like)
       mValueScale(like.mValueScale)
 {
     std::copy(&like.mRot[0][0], &like.mRot[0][0] + 9, &mRot[0][0]);
-    prepareQuadric();
+    prepareSurface();
 }
 
-void Transform::prepareQuadric()
+Transform::Transform(Ptr child, const Transform& like, bool)
+    : mChild(std::move(child)), mTranslate(like.mTranslate), mScale(1.0), mValueScale(1.0)
+{
+    std::copy(&like.mRot[0][0], &like.mRot[0][0] + 9, &mRot[0][0]);
+}
+
+void Transform::prepareSurface()
 {
     // A rigid motion and uniform scale maps the child's own foot points (footPoints()); only a
     // non-uniform scale needs another route.
     if (mScale[0] == mScale[1] && mScale[1] == mScale[2]) return;
+    if (const auto* b = dynamic_cast<const Box*>(mChild.get())) {
+        // The scale acts along the box's own axes: the box with centre S c and sides S size,
+        // moved rigidly, an exact SDF.
+        const Vec3d c = b->center(), size = b->size();
+        const Vec3d sc(c[0] * mScale[0], c[1] * mScale[1], c[2] * mScale[2]);
+        const Vec3d ss(size[0] * mScale[0], size[1] * mScale[1], size[2] * mScale[2]);
+        try {
+            mSurface = Ptr(new Transform(std::make_shared<Box>(sc, ss), *this, true));
+        } catch (const openvdb::ValueError&) {
+            // Sides that overflow, say: the smooth iteration instead.
+        }
+        return;
+    }
     Mat4 local;
     if (const auto* s = dynamic_cast<const Sphere*>(mChild.get())) {
         // |q - c|^2 - r^2: the same surface and sign as the sphere's distance.
@@ -87,7 +106,7 @@ void Transform::prepareQuadric()
         for (int j = i + 1; j < 4; ++j) world[i][j] = world[j][i] = 0.5 * (world[i][j] + world[j][i]);
     }
     try {
-        mQuadric = std::make_shared<Quadric>(world);
+        mSurface = std::make_shared<Quadric>(world);
     } catch (const openvdb::ValueError&) {
         // Not a usable quadric (an overflow, say): the smooth iteration instead.
     }

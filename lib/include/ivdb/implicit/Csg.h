@@ -85,7 +85,8 @@ public:
     void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
                             double* gx, double* gy, double* gz, std::size_t n) const override;
     /// Rigid motion and uniform scale: the child's foot points mapped back. A non-uniform scale
-    /// of a sphere or a quadric is a quadric: its foot points (Quadric::footPoints); of any
+    /// of a sphere or a quadric is a quadric, of a box a box with scaled sides: that surface's
+    /// foot points (Quadric::footPoints; the box's, exact, under the rigid motion); of any
     /// other child, the smooth iteration on this node's own field (of an exact SDF, only where
     /// |f| < far: the field is 1-Lipschitz, so |f| >= far is far enough).
     void footPoints(const double* x, const double* y, const double* z, const double* values,
@@ -108,8 +109,10 @@ public:
 
 private:
     Transform(Ptr child, const Transform& like);
-    /// mQuadric, where the child is a sphere or a quadric and the scale is not uniform.
-    void prepareQuadric();
+    /// The rigid motion of @a like (its rotation and translation) with unit scale.
+    Transform(Ptr child, const Transform& like, bool rigid);
+    /// mSurface, where the scale is not uniform and the child is a sphere, a quadric or a box.
+    void prepareSurface();
     /// World gradients from the child's gradients @a cx, @a cy, @a cz (in place into gx...).
     void worldGradients(const double* cx, const double* cy, const double* cz, double* gx,
                         double* gy, double* gz, std::size_t n) const;
@@ -118,9 +121,10 @@ private:
     Vec3d mTranslate, mScale;
     double mRot[3][3];   // R, row-major
     double mValueScale;  // min(scale)
-    /// The same surface as a world-space Quadric, for footPoints() (called as an Implicit:
-    /// Quadric's batch functions are target clones); null unless prepareQuadric() made one.
-    Ptr mQuadric;
+    /// The same surface, with the same sign, as a shape footPoints() answers directly: a
+    /// world-space Quadric (called as an Implicit: its batch functions are target clones) or a
+    /// rigidly moved Box; null unless prepareSurface() made one.
+    Ptr mSurface;
 };
 
 } // namespace ivdb::implicit

@@ -54,6 +54,10 @@ public:
     bool isExactSdf() const override { return true; }
     std::string typeName() const override { return "box"; }
 
+    const Vec3d& center() const { return mCenter; }
+    /// The full edge lengths (twice the half sizes, exactly).
+    Vec3d size() const { return mHalf * 2.0; }
+
 private:
     Vec3d mCenter, mHalf;
 };
