@@ -48,6 +48,13 @@ Transform::Transform(Ptr child, const Transform& like)
     prepareSurface();
 }
 
+Transform::Transform(Ptr child, const Transform& like, Ptr surface)
+    : mChild(std::move(child)), mTranslate(like.mTranslate), mScale(like.mScale),
+      mValueScale(like.mValueScale), mSurface(std::move(surface))
+{
+    std::copy(&like.mRot[0][0], &like.mRot[0][0] + 9, &mRot[0][0]);
+}
+
 Transform::Transform(Ptr child, const Transform& like, bool)
     : mChild(std::move(child)), mTranslate(like.mTranslate), mScale(1.0), mValueScale(1.0)
 {
@@ -70,6 +77,22 @@ void Transform::prepareSurface()
         } catch (const openvdb::ValueError&) {
             // Sides that overflow, say: the smooth iteration instead.
         }
+        return;
+    }
+    if (const auto* c = dynamic_cast<const Csg*>(mChild.get())) {
+        // Sets commute with the map: the CSG of the children transformed has this node's
+        // surface and sign, and each child may stand for its own surface (a box's scaled box,
+        // an exact SDF; a sphere's quadric): a CSG node's surface and sign depend on its
+        // children's only. Its foot points come from those children's and their creases, where
+        // the smooth iteration on this node's field, not smooth at the creases, answered some
+        // voxels a voxel off.
+        std::vector<Ptr> moved;
+        moved.reserve(c->children().size());
+        for (const Ptr& k : c->children()) {
+            const std::shared_ptr<Transform> t(new Transform(k, *this));
+            moved.push_back(t->mSurface ? t->mSurface : Ptr(t));
+        }
+        mSurface = std::make_shared<Csg>(c->op(), std::move(moved));
         return;
     }
     Mat4 local;
@@ -288,7 +311,9 @@ Implicit::Ptr Transform::prune(const BBoxd& box) const
     const BBoxd local = mapBox(box, [this](const Vec3d& p) { return toLocal(p); });
     Ptr c = mChild->prune(local);
     if (c == mChild) return shared_from_this();
-    return Ptr(new Transform(std::move(c), *this));
+    // The surface pruned to the same box (a CSG drops the same children; others are kept),
+    // rather than made anew for every box.
+    return Ptr(new Transform(std::move(c), *this, mSurface ? mSurface->prune(box) : nullptr));
 }
 
 } // namespace ivdb::implicit

@@ -85,10 +85,11 @@ public:
     void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
                             double* gx, double* gy, double* gz, std::size_t n) const override;
     /// Rigid motion and uniform scale: the child's foot points mapped back. A non-uniform scale
-    /// of a sphere or a quadric is a quadric, of a box a box with scaled sides: that surface's
-    /// foot points (Quadric::footPoints; the box's, exact, under the rigid motion); of any
-    /// other child, the smooth iteration on this node's own field (of an exact SDF, only where
-    /// |f| < far: the field is 1-Lipschitz, so |f| >= far is far enough).
+    /// of a sphere or a quadric is a quadric, of a box a box with scaled sides, of a CSG node
+    /// the CSG of its children transformed: that surface's foot points (Quadric::footPoints;
+    /// the box's, exact, under the rigid motion; Csg::footPoints); of any other child, the
+    /// smooth iteration on this node's own field (of an exact SDF, only where |f| < far: the
+    /// field is 1-Lipschitz, so |f| >= far is far enough).
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
@@ -109,9 +110,12 @@ public:
 
 private:
     Transform(Ptr child, const Transform& like);
+    /// As @a like, with @a child and @a surface for mSurface (prune(): the surface pruned).
+    Transform(Ptr child, const Transform& like, Ptr surface);
     /// The rigid motion of @a like (its rotation and translation) with unit scale.
     Transform(Ptr child, const Transform& like, bool rigid);
-    /// mSurface, where the scale is not uniform and the child is a sphere, a quadric or a box.
+    /// mSurface, where the scale is not uniform and the child is a sphere, a quadric, a box or
+    /// a CSG node.
     void prepareSurface();
     /// World gradients from the child's gradients @a cx, @a cy, @a cz (in place into gx...).
     void worldGradients(const double* cx, const double* cy, const double* cz, double* gx,
@@ -122,8 +126,9 @@ private:
     double mRot[3][3];   // R, row-major
     double mValueScale;  // min(scale)
     /// The same surface, with the same sign, as a shape footPoints() answers directly: a
-    /// world-space Quadric (called as an Implicit: its batch functions are target clones) or a
-    /// rigidly moved Box; null unless prepareSurface() made one.
+    /// world-space Quadric (called as an Implicit: its batch functions are target clones), a
+    /// rigidly moved Box, or the CSG of the children transformed (or of their own such
+    /// surfaces); null unless prepareSurface() made one.
     Ptr mSurface;
 };
 
