@@ -776,13 +776,8 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
     }
     // Rigid motion and uniform scale: the child's foot points, mapped.
     double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch], local[kMaxBatch];
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
-        qx[i] = q[0];
-        qy[i] = q[1];
-        qz[i] = q[2];
-        local[i] = values[i] / mValueScale;
-    }
+    toLocal(x, y, z, n, qx, qy, qz);
+    for (std::size_t i = 0; i < n; ++i) local[i] = values[i] / mValueScale;
     FootQuery childQuery = query;
     childQuery.tolerance = query.tolerance / mValueScale;
     childQuery.far = query.far / mValueScale;

@@ -144,6 +144,17 @@ Vec3d Transform::toLocal(const Vec3d& p) const
                  (mRot[0][2] * dx + mRot[1][2] * dy + mRot[2][2] * dz) / mScale[2]);
 }
 
+void Transform::toLocal(const double* x, const double* y, const double* z, std::size_t n,
+                        double* qx, double* qy, double* qz) const
+{
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
+        qx[i] = q[0];
+        qy[i] = q[1];
+        qz[i] = q[2];
+    }
+}
+
 Vec3d Transform::toWorld(const Vec3d& q) const
 {
     const Vec3d s(q[0] * mScale[0], q[1] * mScale[1], q[2] * mScale[2]);
@@ -180,12 +191,7 @@ void Transform::values(const double* x, const double* y, const double* z, double
                        std::size_t n) const
 {
     double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
-        qx[i] = q[0];
-        qy[i] = q[1];
-        qz[i] = q[2];
-    }
+    toLocal(x, y, z, n, qx, qy, qz);
     mChild->values(qx, qy, qz, out, n);
     for (std::size_t i = 0; i < n; ++i) out[i] *= mValueScale;
 }
@@ -206,12 +212,7 @@ void Transform::gradients(const double* x, const double* y, const double* z, dou
                           double* gy, double* gz, std::size_t n) const
 {
     double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
-        qx[i] = q[0];
-        qy[i] = q[1];
-        qz[i] = q[2];
-    }
+    toLocal(x, y, z, n, qx, qy, qz);
     // The child's gradients into gx..gz, then mapped in place (each point reads only its own).
     mChild->gradients(qx, qy, qz, gx, gy, gz, n);
     worldGradients(gx, gy, gz, gx, gy, gz, n);
@@ -222,12 +223,7 @@ void Transform::valuesAndGradients(const double* x, const double* y, const doubl
                                    std::size_t n) const
 {
     double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
-        qx[i] = q[0];
-        qy[i] = q[1];
-        qz[i] = q[2];
-    }
+    toLocal(x, y, z, n, qx, qy, qz);
     mChild->valuesAndGradients(qx, qy, qz, out, gx, gy, gz, n);
     for (std::size_t i = 0; i < n; ++i) out[i] *= mValueScale;
     worldGradients(gx, gy, gz, gx, gy, gz, n);
@@ -273,12 +269,7 @@ void Transform::intervals(const double* cx, const double* cy, const double* cz, 
                         std::abs(mRot[2][i]) * half[2]) / mScale[i];
     }
     double qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch];
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d q = toLocal(Vec3d(cx[i], cy[i], cz[i]));
-        qx[i] = q[0];
-        qy[i] = q[1];
-        qz[i] = q[2];
-    }
+    toLocal(cx, cy, cz, n, qx, qy, qz);
     mChild->intervals(qx, qy, qz, localHalf, n, lo, hi);
     for (std::size_t i = 0; i < n; ++i) {
         lo[i] *= mValueScale;

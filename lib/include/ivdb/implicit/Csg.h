@@ -117,6 +117,9 @@ private:
     /// mSurface, where the scale is not uniform and the child is a sphere, a quadric, a box or
     /// a CSG node.
     void prepareSurface();
+    /// toLocal() of @a n points, into @a qx, @a qy, @a qz.
+    void toLocal(const double* x, const double* y, const double* z, std::size_t n, double* qx,
+                 double* qy, double* qz) const;
     /// World gradients from the child's gradients @a cx, @a cy, @a cz (in place into gx...).
     void worldGradients(const double* cx, const double* cy, const double* cz, double* gx,
                         double* gy, double* gz, std::size_t n) const;
