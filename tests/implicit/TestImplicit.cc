@@ -608,10 +608,14 @@ TEST_F(TestImplicit, ValuesAndFootPointsMatchTheTwoCallsBitForBit)
 {
     // valuesAndFootPoints() (one evaluation of a blend's children for the values, the lead rule
     // and the iteration's start) gives values() and then footPoints() of those values, bit for
-    // bit: for every node and for blends of every operation and both kernels.
+    // bit: for every node and for blends of every operation and both kernels. Without foot
+    // points asked for (what the rasterizer asks; a blend then evaluates its children's
+    // gradients only where it iterates), the same distances and certificates as with them.
     FootQuery query;
     query.tolerance = 1e-6;
     query.far = 0.5;
+    FootQuery noFeet = query;
+    noFeet.feet = false;
     for (const Case& c : withBlends(allCases())) {
         for (std::size_t n : {std::size_t(1), std::size_t(37), kMaxBatch}) {
             std::vector<double> x(n), y(n), z(n), v(n), fv(n);
@@ -631,6 +635,16 @@ TEST_F(TestImplicit, ValuesAndFootPointsMatchTheTwoCallsBitForBit)
                 ASSERT_EQ(one->x[i], two->x[i]) << c.name << " i=" << i;
                 ASSERT_EQ(one->y[i], two->y[i]) << c.name << " i=" << i;
                 ASSERT_EQ(one->z[i], two->z[i]) << c.name << " i=" << i;
+            }
+            auto bare = std::make_unique<FootPoints>(), both = std::make_unique<FootPoints>();
+            c.f->footPoints(x.data(), y.data(), z.data(), v.data(), n, noFeet, *bare);
+            c.f->valuesAndFootPoints(x.data(), y.data(), z.data(), n, noFeet, fv.data(), *both);
+            for (std::size_t i = 0; i < n; ++i) {
+                ASSERT_EQ(fv[i], v[i]) << c.name << " i=" << i;
+                ASSERT_EQ(bare->ok[i], two->ok[i]) << c.name << " i=" << i;
+                ASSERT_EQ(bare->distance[i], two->distance[i]) << c.name << " i=" << i;
+                ASSERT_EQ(both->ok[i], two->ok[i]) << c.name << " i=" << i;
+                ASSERT_EQ(both->distance[i], two->distance[i]) << c.name << " i=" << i;
             }
         }
     }

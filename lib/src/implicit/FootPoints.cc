@@ -906,11 +906,14 @@ void Blend::footPoints(const double* x, const double* y, const double* z, const 
                        std::size_t n, const FootQuery& query, FootPoints& out) const
 {
     if (!leadRuleApplies()) return Implicit::footPoints(x, y, z, values, n, query, out);
-    // The children's values and gradients once, for the lead rule and for the smooth
-    // iteration's start (the blend's gradient from them).
+    // With foot points asked for, the children's values and gradients once, for the lead rule
+    // (the deciding child's gradient) and for the smooth iteration's start (the blend's
+    // gradient from them). Without, the values alone: the points the lead and far rules
+    // certify need no gradient.
     const std::size_t nc = mChildren.size();
-    detail::BatchRows rows(5 * nc * n);
-    double *terms = rows.get(), *cg = terms + nc * n, *w = cg + 3 * nc * n;
+    detail::BatchRows rows((query.feet ? 5 : 1) * nc * n);
+    double *terms = rows.get(), *cg = query.feet ? terms + nc * n : nullptr;
+    double* w = query.feet ? cg + 3 * nc * n : nullptr;
     childRows(x, y, z, n, terms, cg);
     feetFromRows(x, y, z, values, n, query, terms, cg, w, false, out);
 }
@@ -923,10 +926,12 @@ void Blend::valuesAndFootPoints(const double* x, const double* y, const double* 
     }
     // values() and footPoints() from one evaluation of the children; the super-elliptic
     // kernel's exponentials serve the values and the weights (values()' bits: the same
-    // operations in the same order).
+    // operations in the same order). Without foot points asked for, the values alone, as in
+    // footPoints().
     const std::size_t nc = mChildren.size();
-    detail::BatchRows rows(5 * nc * n);
-    double *terms = rows.get(), *cg = terms + nc * n, *w = cg + 3 * nc * n;
+    detail::BatchRows rows((query.feet ? 5 : 1) * nc * n);
+    double *terms = rows.get(), *cg = query.feet ? terms + nc * n : nullptr;
+    double* w = query.feet ? cg + 3 * nc * n : nullptr;
     childRows(x, y, z, n, terms, cg);
     const bool haveWeights = valuesFromRows(terms, n, values, w);
     feetFromRows(x, y, z, values, n, query, terms, cg, w, haveWeights, out);
@@ -982,6 +987,11 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
         }
     }
     if (!anyBlended) return;
+    if (!cg) {
+        // Values only: the blend's gradients (gradients()' bits) at the points left alone.
+        detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+        return;
+    }
     double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch];
     gradientsFromRows(terms, cg, n, w, haveWeights, gx, gy, gz);
     detail::iterateUncertified(*this, x, y, z, values, n, query, out, gx, gy, gz);

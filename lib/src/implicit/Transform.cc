@@ -5,6 +5,8 @@
 
 #include <openvdb/Exceptions.h>
 
+#include "../util/Simd.h"
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -144,15 +146,30 @@ Vec3d Transform::toLocal(const Vec3d& p) const
                  (mRot[0][2] * dx + mRot[1][2] * dy + mRot[2][2] * dz) / mScale[2]);
 }
 
+namespace {
+/// Transform::toLocal() of @a n points, in its order of operations (so the same bits), as a
+/// loop that vectorizes: @a r the rotation, @a t the translation, @a s the scale.
+IVDB_VECTOR_CLONES
+void mapToLocal(const double (&r)[3][3], const Vec3d& t, const Vec3d& s, const double* __restrict x,
+                const double* __restrict y, const double* __restrict z, std::size_t n,
+                double* __restrict qx, double* __restrict qy, double* __restrict qz)
+{
+    const double r00 = r[0][0], r01 = r[0][1], r02 = r[0][2], r10 = r[1][0], r11 = r[1][1],
+                 r12 = r[1][2], r20 = r[2][0], r21 = r[2][1], r22 = r[2][2];
+    const double t0 = t[0], t1 = t[1], t2 = t[2], s0 = s[0], s1 = s[1], s2 = s[2];
+    for (std::size_t i = 0; i < n; ++i) {
+        const double dx = x[i] - t0, dy = y[i] - t1, dz = z[i] - t2;
+        qx[i] = (r00 * dx + r10 * dy + r20 * dz) / s0;
+        qy[i] = (r01 * dx + r11 * dy + r21 * dz) / s1;
+        qz[i] = (r02 * dx + r12 * dy + r22 * dz) / s2;
+    }
+}
+} // namespace
+
 void Transform::toLocal(const double* x, const double* y, const double* z, std::size_t n,
                         double* qx, double* qy, double* qz) const
 {
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3d q = toLocal(Vec3d(x[i], y[i], z[i]));
-        qx[i] = q[0];
-        qy[i] = q[1];
-        qz[i] = q[2];
-    }
+    mapToLocal(mRot, mTranslate, mScale, x, y, z, n, qx, qy, qz);
 }
 
 Vec3d Transform::toWorld(const Vec3d& q) const

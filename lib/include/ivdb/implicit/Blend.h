@@ -95,7 +95,8 @@ public:
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     /// The children evaluated once for the values, the lead rule and the smooth iteration's
-    /// start (exact SDF children).
+    /// start (exact SDF children); without foot points asked for, their values alone, and
+    /// the gradients only at the points the lead and far rules leave.
     void valuesAndFootPoints(const double* x, const double* y, const double* z, std::size_t n,
                              const FootQuery& query, double* values,
                              FootPoints& out) const override;
@@ -133,7 +134,9 @@ private:
     /// True if the foot points can use the lead rule: every child an exact SDF, at most 64.
     bool leadRuleApplies() const;
     /// footPoints() from childRows()' @a terms and gradients @a cg; @a w holds the weights
-    /// d f / d t if @a haveWeights, else is where they are computed.
+    /// d f / d t if @a haveWeights, else is where they are computed. @a cg and @a w null (no
+    /// foot points asked for): the children's values alone, and the blend's gradients found
+    /// only where the lead and far rules leave points to iterate.
     void feetFromRows(const double* x, const double* y, const double* z, const double* values,
                       std::size_t n, const FootQuery& query, const double* terms,
                       const double* cg, double* w, bool haveWeights, FootPoints& out) const;
