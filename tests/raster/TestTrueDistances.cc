@@ -104,6 +104,60 @@ double ellipsoidDistance(const Vec3d& e, const Vec3d& p)
     return inside < 0.0 ? -(p - q).length() : (p - q).length();
 }
 
+/// The distance from @a p to the surface of the capped cone (a, b, radii ra, rb) mapped to the
+/// world by @a t, independently of the library's foot points: the least |X - p| over the mapped
+/// surface's parameters, its side (angle, axial position) and its two caps (angle, radius), each
+/// from the best point of a coarse grid refined by a pattern search (the rims are the patches'
+/// edges, where the search stops against its bounds).
+double mappedConeDistance(const implicit::Transform& t, const Vec3d& a, const Vec3d& b,
+                          double ra, double rb, const Vec3d& p)
+{
+    const Vec3d u = (b - a).unit();
+    const Vec3d v1 = u.cross(std::abs(u[0]) < 0.9 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0)).unit();
+    const Vec3d v2 = u.cross(v1);
+    const double twoPi = 2.0 * M_PI;
+    // Each patch: (angle, x in [0, 1]) to a child-space point.
+    const std::function<Vec3d(double, double)> patches[3] = {
+        [&](double th, double x) {
+            return a + (b - a) * x + (v1 * std::cos(th) + v2 * std::sin(th)) * (ra + (rb - ra) * x);
+        },
+        [&](double th, double x) { return a + (v1 * std::cos(th) + v2 * std::sin(th)) * (ra * x); },
+        [&](double th, double x) { return b + (v1 * std::cos(th) + v2 * std::sin(th)) * (rb * x); }};
+    double best = std::numeric_limits<double>::max();
+    for (const auto& patch : patches) {
+        auto f = [&](double th, double x) {
+            return (t.toWorld(patch(th, std::clamp(x, 0.0, 1.0))) - p).lengthSqr();
+        };
+        constexpr int kAngles = 96, kSteps = 48;
+        double th = 0.0, x = 0.0, fx = std::numeric_limits<double>::max();
+        for (int i = 0; i < kAngles; ++i) {
+            for (int j = 0; j <= kSteps; ++j) {
+                const double v = f(twoPi * i / kAngles, double(j) / kSteps);
+                if (v < fx) fx = v, th = twoPi * i / kAngles, x = double(j) / kSteps;
+            }
+        }
+        double dth = twoPi / kAngles, dxs = 1.0 / kSteps;
+        while (dth > 1e-13) {
+            double bt = th, bx = x, bf = fx;
+            for (int i = -1; i <= 1; ++i) {
+                for (int j = -1; j <= 1; ++j) {
+                    const double ct = th + i * dth, cx = std::clamp(x + j * dxs, 0.0, 1.0);
+                    const double v = f(ct, cx);
+                    if (v < bf) bf = v, bt = ct, bx = cx;
+                }
+            }
+            if (bf < fx) {
+                th = bt, x = bx, fx = bf;
+            } else {
+                dth *= 0.5;
+                dxs *= 0.5;
+            }
+        }
+        best = std::min(best, fx);
+    }
+    return std::sqrt(best);
+}
+
 } // namespace
 
 TEST_F(TestTrueDistances, TwoSphereCsgIsTheDistanceToItsSurface)
@@ -331,6 +385,53 @@ TEST_F(TestTrueDistances, NonUniformScaleOfABoxIsTheScaledBox)
                 (unsigned long long)stats.sweptDistances);
     EXPECT_GT(stats.localDistances, 0u);
     EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u);
+}
+
+TEST_F(TestTrueDistances, NonUniformScaleOfACappedCylinderOrConeIsItsQuadricBetweenItsCaps)
+{
+    // A capped cylinder or cone scaled non-uniformly is the world quadric of its infinite cone
+    // between the world planes of its caps (an intersection whose creases are the rims). Its
+    // distances at 400 or so band voxels against the least distance to the mapped surface by a
+    // parameter search (mappedConeDistance), within the certified tolerance, 1e-3 voxel, every
+    // voxel local. Before, the smooth iteration on the scaled field (not smooth at the rims)
+    // answered 11,867 of the cylinder's voxels more than 0.02 voxel too far, up to 1.25 voxels,
+    // and left 20,617 approximate to the lattice search.
+    struct Case { const char* what; Vec3d a, b; double ra, rb; Vec3d deg, scale, t; };
+    const Case cases[] = {
+        {"capped cylinder", Vec3d(0, 0, -0.5), Vec3d(0, 0, 0.5), 0.4, 0.4, Vec3d(10, 20, 30),
+         Vec3d(1.5, 1.0, 0.8), Vec3d(0.05, -0.02, 0.03)},
+        {"capped cone", Vec3d(0.1, -0.5, 0), Vec3d(-0.1, 0.5, 0.1), 0.45, 0.2, Vec3d(-20, 35, 10),
+         Vec3d(0.7, 1.3, 1.1), Vec3d(0.02, 0.05, -0.04)}};
+    const double dx = 0.01;
+    for (const Case& c : cases) {
+        const auto shape = std::make_shared<implicit::Transform>(
+            std::make_shared<implicit::CappedCone>(c.a, c.b, c.ra, c.rb), c.t, c.deg, c.scale);
+        raster::RasterStats stats;
+        raster::RasterSettings s = settings(dx);
+        s.stats = &stats;
+        const auto g = raster::rasterize(shape, s);
+        EXPECT_GT(stats.localDistances, 0u) << c.what;
+        EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u)
+            << c.what;
+        const auto count = g->activeVoxelCount();
+        const openvdb::Index64 every = std::max<openvdb::Index64>(1, count / 400);
+        openvdb::Index64 n = 0;
+        int checked = 0;
+        double worst = 0.0;
+        for (auto it = g->cbeginValueOn(); it; ++it, ++n) {
+            if (n % every != 0) continue;
+            const Vec3d p = Vec3d(it.getCoord().x(), it.getCoord().y(), it.getCoord().z()) * dx;
+            const double sign = shape->value(p) < 0.0 ? -1.0 : 1.0;
+            const double ref = sign * mappedConeDistance(*shape, c.a, c.b, c.ra, c.rb, p);
+            const double err = std::abs(double(*it) - ref) / dx;
+            worst = std::max(worst, err);
+            EXPECT_LE(err, 1e-3) << c.what << " at " << p << ": " << *it / dx << " voxels, the "
+                                 << "surface " << ref / dx << " voxels away";
+            ++checked;
+        }
+        EXPECT_GE(checked, 300) << c.what;
+        std::printf("%s: %d voxels checked, worst %.2g voxel\n", c.what, checked, worst);
+    }
 }
 
 TEST_F(TestTrueDistances, NonUniformScaleOfACsgIsTheCsgOfItsChildrenScaled)

@@ -63,11 +63,84 @@ Transform::Transform(Ptr child, const Transform& like, bool)
     std::copy(&like.mRot[0][0], &like.mRot[0][0] + 9, &mRot[0][0]);
 }
 
+namespace {
+
+/// The child-space quadric of the infinite cone (or cylinder) through @a c's rims, negative
+/// inside.
+Mat4 coneQuadric(const CappedCone& c)
+{
+    // With w = q - a, s = u . w and r(s) = r_a + k s (k = (r_b - r_a) / L):
+    // |w|^2 - s^2 - r(s)^2 = w^T (I - (1 + k^2) u u^T) w - 2 r_a k s - r_a^2, negative inside.
+    const Vec3d& a = c.a();
+    const Vec3d& u = c.axis();
+    const double ra = c.radiusA(), k = (c.radiusB() - ra) / c.length();
+    double m[3][3];
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) m[i][j] = (i == j ? 1.0 : 0.0) - (1.0 + k * k) * u[i] * u[j];
+    }
+    Mat4 q{};
+    double aAa = 0.0;
+    for (int i = 0; i < 3; ++i) {
+        const double ai = m[i][0] * a[0] + m[i][1] * a[1] + m[i][2] * a[2];
+        for (int j = 0; j < 3; ++j) q[i][j] = m[i][j];
+        q[i][3] = q[3][i] = -ai - ra * k * u[i];
+        aAa += a[i] * ai;
+    }
+    q[3][3] = aAa + 2.0 * ra * k * u.dot(a) - ra * ra;
+    return q;
+}
+
+/// The world image, under q = L p + l (@a m holds L = S^-1 R^T and l: the child-space map
+/// [q 1] = M [p 1]), of the child-space half-space outward . (q - point) <= 0: the plane
+/// n . p + d with n = L^T outward and d = outward . (l - point), over |n|, its exact SDF (a
+/// quadric).
+Implicit::Ptr capPlane(const double (&m)[4][4], const Vec3d& point, const Vec3d& outward)
+{
+    const Vec3d l(m[0][3], m[1][3], m[2][3]);
+    Vec3d n;
+    for (int j = 0; j < 3; ++j) n[j] = m[0][j] * outward[0] + m[1][j] * outward[1] + m[2][j] * outward[2];
+    const double len = n.length();
+    const double d = outward.dot(l - point) / len;
+    n /= len;
+    Mat4 q{};
+    for (int i = 0; i < 3; ++i) q[i][3] = q[3][i] = 0.5 * n[i];
+    q[3][3] = d;
+    return std::make_shared<Quadric>(q);
+}
+
+/// The world quadric M^T Q M of the child-space quadric @a local under [q 1] = M [p 1].
+/// @throw openvdb::ValueError if that is not a usable quadric
+Implicit::Ptr worldQuadric(const double (&m)[4][4], const Mat4& local)
+{
+    // Symmetrized: the products round differently on either side of the diagonal.
+    double qm[4][4] = {}; // Q M
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) qm[i][j] += local[i][k] * m[k][j];
+    Mat4 world{};
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) world[i][j] += m[k][i] * qm[k][j];
+    for (int i = 0; i < 4; ++i) {
+        for (int j = i + 1; j < 4; ++j) world[i][j] = world[j][i] = 0.5 * (world[i][j] + world[j][i]);
+    }
+    return std::make_shared<Quadric>(world);
+}
+
+} // namespace
+
 void Transform::prepareSurface()
 {
     // A rigid motion and uniform scale maps the child's own foot points (footPoints()); only a
     // non-uniform scale needs another route.
     if (mScale[0] == mScale[1] && mScale[1] == mScale[2]) return;
+    // [q 1] = M [p 1] with M = [[S^-1 R^T, -S^-1 R^T t], [0 0 0 1]].
+    double m[4][4] = {};
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) m[i][j] = mRot[j][i] / mScale[i];
+        m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
+    }
+    m[3][3] = 1.0;
     if (const auto* b = dynamic_cast<const Box*>(mChild.get())) {
         // The scale acts along the box's own axes: the box with centre S c and sides S size,
         // moved rigidly, an exact SDF.
@@ -97,6 +170,25 @@ void Transform::prepareSurface()
         mSurface = std::make_shared<Csg>(c->op(), std::move(moved));
         return;
     }
+    if (const auto* c = dynamic_cast<const CappedCone*>(mChild.get())) {
+        // The solid between the two cap planes within the cone (or cylinder) through the rim
+        // circles: each maps to a surface whose foot points have closed forms (the world
+        // quadric, and planes, exact SDFs), and their intersection's creases (the rims) are the
+        // CSG's; its sign and surface are the capped cone's. The cone's other nappe lies beyond
+        // a cap. The smooth iteration on the scaled field, not smooth at the rims, answered
+        // voxels more than a voxel off. A tip (a radius of 0) is the quadric's singular point:
+        // near it some voxels outside are still left to the lattice search (docs/method.md).
+        try {
+            const Vec3d b = c->a() + c->axis() * c->length();
+            mSurface = std::make_shared<Csg>(
+                Csg::Op::Intersection,
+                std::vector<Ptr>{worldQuadric(m, coneQuadric(*c)), capPlane(m, c->a(), -c->axis()),
+                                 capPlane(m, b, c->axis())});
+        } catch (const openvdb::ValueError&) {
+            // Not a usable quadric or plane (an overflow, say): the smooth iteration instead.
+        }
+        return;
+    }
     Mat4 local;
     if (const auto* s = dynamic_cast<const Sphere*>(mChild.get())) {
         // |q - c|^2 - r^2: the same surface and sign as the sphere's distance.
@@ -111,27 +203,8 @@ void Transform::prepareSurface()
     } else {
         return;
     }
-    // [q 1] = M [p 1] with M = [[S^-1 R^T, -S^-1 R^T t], [0 0 0 1]], so the world quadric is
-    // M^T Q M (symmetrized: the products round differently on either side of the diagonal).
-    double m[4][4] = {};
-    for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) m[i][j] = mRot[j][i] / mScale[i];
-        m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
-    }
-    m[3][3] = 1.0;
-    double qm[4][4] = {}; // Q M
-    for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j)
-            for (int k = 0; k < 4; ++k) qm[i][j] += local[i][k] * m[k][j];
-    Mat4 world{};
-    for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j)
-            for (int k = 0; k < 4; ++k) world[i][j] += m[k][i] * qm[k][j];
-    for (int i = 0; i < 4; ++i) {
-        for (int j = i + 1; j < 4; ++j) world[i][j] = world[j][i] = 0.5 * (world[i][j] + world[j][i]);
-    }
     try {
-        mSurface = std::make_shared<Quadric>(world);
+        mSurface = worldQuadric(m, local);
     } catch (const openvdb::ValueError&) {
         // Not a usable quadric (an overflow, say): the smooth iteration instead.
     }

@@ -114,8 +114,8 @@ private:
     Transform(Ptr child, const Transform& like, Ptr surface);
     /// The rigid motion of @a like (its rotation and translation) with unit scale.
     Transform(Ptr child, const Transform& like, bool rigid);
-    /// mSurface, where the scale is not uniform and the child is a sphere, a quadric, a box or
-    /// a CSG node.
+    /// mSurface, where the scale is not uniform and the child is a sphere, a quadric, a box, a
+    /// capped cylinder or cone, or a CSG node.
     void prepareSurface();
     /// toLocal() of @a n points, into @a qx, @a qy, @a qz.
     void toLocal(const double* x, const double* y, const double* z, std::size_t n, double* qx,
@@ -130,8 +130,9 @@ private:
     double mValueScale;  // min(scale)
     /// The same surface, with the same sign, as a shape footPoints() answers directly: a
     /// world-space Quadric (called as an Implicit: its batch functions are target clones), a
-    /// rigidly moved Box, or the CSG of the children transformed (or of their own such
-    /// surfaces); null unless prepareSurface() made one.
+    /// rigidly moved Box, the intersection of a cone's world quadric and its caps' planes, or
+    /// the CSG of the children transformed (or of their own such surfaces); null unless
+    /// prepareSurface() made one.
     Ptr mSurface;
 };
 

@@ -150,6 +150,15 @@ public:
     bool isExactSdf() const override { return true; }
     std::string typeName() const override { return mName; }
 
+    /// The end point a (radius radiusA()).
+    const Vec3d& a() const { return mA; }
+    /// The unit axis from a to b.
+    const Vec3d& axis() const { return mAxis; }
+    /// |b - a|.
+    double length() const { return mLength; }
+    double radiusA() const { return mRadiusA; }
+    double radiusB() const { return mRadiusB; }
+
 private:
     /// The signed distance, and in @a dir the unit direction of increase in (radial, axial)
     /// coordinates of the half-plane; @a radial the unit radial direction.
