@@ -8,7 +8,7 @@ packages=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev liblz4-dev zlib1g-dev libimath-dev
   libcli11-dev nlohmann-json3-dev
   libgtest-dev libbenchmark-dev
-  libopenvdb-tools python3-openvdb python3-numpy python3-matplotlib libpng-dev libopenexr-dev
+  libopenvdb-tools python3-openvdb python3-numpy python3-matplotlib python3-scipy libpng-dev libopenexr-dev
   libnanovdb-dev libnanovdb-tools libassimp-dev
   openmpi-bin libopenmpi-dev
   blender
