@@ -741,11 +741,11 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
                            FootPoints& out) const
 {
     if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2]) && mSurface) {
-        // A non-uniform scale of a sphere, a quadric, a box or a CSG node: the same surface's
-        // foot points (a world quadric's, a rigidly moved box's, the CSG's of its children
-        // scaled), from its own values. Of an exact SDF
-        // child, a point that surface leaves uncertified (a degenerate foot point deep inside)
-        // with |f| >= far is that far at least, as below.
+        // A non-uniform scale of a sphere, a quadric, a box, a capped cylinder or cone, or a
+        // CSG node: the same surface's foot points (a world quadric's, a rigidly moved box's,
+        // the CSG's of a cone's quadric and cap planes, the CSG's of its children scaled), from
+        // its own values. Of an exact SDF child, a point that surface leaves uncertified (a
+        // degenerate foot point deep inside) with |f| >= far is that far at least, as below.
         double sv[kMaxBatch];
         mSurface->values(x, y, z, sv, n);
         mSurface->footPoints(x, y, z, sv, n, query, out);

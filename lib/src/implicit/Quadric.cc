@@ -421,14 +421,19 @@ std::array<Vec3d, 3> frameFromAxis(const Vec3d& axis)
 
 Mat4 placeQuadric(const Mat4& local, const Vec3d& origin, const std::array<Vec3d, 3>& frame)
 {
-    // local q = R^T (p - o), i.e. [q 1] = M [p 1] with M = [[R^T, -R^T o], [0, 1]];
-    // Q_world = M^T Q_local M.
-    double m[4][4] = {};
+    // local q = R^T (p - o), i.e. [q 1] = M [p 1] with M = [[R^T, -R^T o], [0, 1]].
+    Mat4 m{};
     for (int i = 0; i < 3; ++i) {
         for (int j = 0; j < 3; ++j) m[i][j] = frame[i][j];
         m[i][3] = -frame[i].dot(origin);
     }
     m[3][3] = 1.0;
+    return mapQuadric(local, m);
+}
+
+Mat4 mapQuadric(const Mat4& local, const Mat4& m)
+{
+    // Q_world = M^T Q_local M.
     double t[4][4] = {};
     for (int i = 0; i < 4; ++i)
         for (int j = 0; j < 4; ++j)

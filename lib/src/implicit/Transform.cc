@@ -91,40 +91,13 @@ Mat4 coneQuadric(const CappedCone& c)
 }
 
 /// The world image, under q = L p + l (@a m holds L = S^-1 R^T and l: the child-space map
-/// [q 1] = M [p 1]), of the child-space half-space outward . (q - point) <= 0: the plane
-/// n . p + d with n = L^T outward and d = outward . (l - point), over |n|, its exact SDF (a
-/// quadric).
-Implicit::Ptr capPlane(const double (&m)[4][4], const Vec3d& point, const Vec3d& outward)
+/// [q 1] = M [p 1]), of the child-space half-space outward . (q - point) <= 0: the half-space
+/// (L^T outward) . p < outward . (point - l), as its plane's exact SDF.
+Implicit::Ptr capPlane(const Mat4& m, const Vec3d& point, const Vec3d& outward)
 {
-    const Vec3d l(m[0][3], m[1][3], m[2][3]);
     Vec3d n;
     for (int j = 0; j < 3; ++j) n[j] = m[0][j] * outward[0] + m[1][j] * outward[1] + m[2][j] * outward[2];
-    const double len = n.length();
-    const double d = outward.dot(l - point) / len;
-    n /= len;
-    Mat4 q{};
-    for (int i = 0; i < 3; ++i) q[i][3] = q[3][i] = 0.5 * n[i];
-    q[3][3] = d;
-    return std::make_shared<Quadric>(q);
-}
-
-/// The world quadric M^T Q M of the child-space quadric @a local under [q 1] = M [p 1].
-/// @throw openvdb::ValueError if that is not a usable quadric
-Implicit::Ptr worldQuadric(const double (&m)[4][4], const Mat4& local)
-{
-    // Symmetrized: the products round differently on either side of the diagonal.
-    double qm[4][4] = {}; // Q M
-    for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j)
-            for (int k = 0; k < 4; ++k) qm[i][j] += local[i][k] * m[k][j];
-    Mat4 world{};
-    for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j)
-            for (int k = 0; k < 4; ++k) world[i][j] += m[k][i] * qm[k][j];
-    for (int i = 0; i < 4; ++i) {
-        for (int j = i + 1; j < 4; ++j) world[i][j] = world[j][i] = 0.5 * (world[i][j] + world[j][i]);
-    }
-    return std::make_shared<Quadric>(world);
+    return makePlane(n, outward.dot(point - Vec3d(m[0][3], m[1][3], m[2][3])));
 }
 
 } // namespace
@@ -135,7 +108,7 @@ void Transform::prepareSurface()
     // non-uniform scale needs another route.
     if (mScale[0] == mScale[1] && mScale[1] == mScale[2]) return;
     // [q 1] = M [p 1] with M = [[S^-1 R^T, -S^-1 R^T t], [0 0 0 1]].
-    double m[4][4] = {};
+    Mat4 m{};
     for (int i = 0; i < 3; ++i) {
         for (int j = 0; j < 3; ++j) m[i][j] = mRot[j][i] / mScale[i];
         m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
@@ -182,7 +155,8 @@ void Transform::prepareSurface()
             const Vec3d b = c->a() + c->axis() * c->length();
             mSurface = std::make_shared<Csg>(
                 Csg::Op::Intersection,
-                std::vector<Ptr>{worldQuadric(m, coneQuadric(*c)), capPlane(m, c->a(), -c->axis()),
+                std::vector<Ptr>{std::make_shared<Quadric>(mapQuadric(coneQuadric(*c), m)),
+                                 capPlane(m, c->a(), -c->axis()),
                                  capPlane(m, b, c->axis())});
         } catch (const openvdb::ValueError&) {
             // Not a usable quadric or plane (an overflow, say): the smooth iteration instead.
@@ -204,7 +178,8 @@ void Transform::prepareSurface()
         return;
     }
     try {
-        mSurface = worldQuadric(m, local);
+        // The world surface is that of M^T Q M.
+        mSurface = std::make_shared<Quadric>(mapQuadric(local, m));
     } catch (const openvdb::ValueError&) {
         // Not a usable quadric (an overflow, say): the smooth iteration instead.
     }

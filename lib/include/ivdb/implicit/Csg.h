@@ -85,9 +85,10 @@ public:
     void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
                             double* gx, double* gy, double* gz, std::size_t n) const override;
     /// Rigid motion and uniform scale: the child's foot points mapped back. A non-uniform scale
-    /// of a sphere or a quadric is a quadric, of a box a box with scaled sides, of a CSG node
-    /// the CSG of its children transformed: that surface's foot points (Quadric::footPoints;
-    /// the box's, exact, under the rigid motion; Csg::footPoints); of any other child, the
+    /// of a sphere or a quadric is a quadric, of a box a box with scaled sides, of a capped
+    /// cylinder or cone the intersection of a quadric and two planes, of a CSG node the CSG of
+    /// its children transformed: that surface's foot points (Quadric::footPoints; the box's,
+    /// exact, under the rigid motion; Csg::footPoints); of any other child, the
     /// smooth iteration on this node's own field (of an exact SDF, only where |f| < far: the
     /// field is 1-Lipschitz, so |f| >= far is far enough).
     void footPoints(const double* x, const double* y, const double* z, const double* values,

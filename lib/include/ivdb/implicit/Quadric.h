@@ -65,6 +65,10 @@ std::array<Vec3d, 3> frameFromAxis(const Vec3d& axis);
 /// @brief Q of a quadric given in a local frame (origin @a origin, axes @a frame), in world space.
 Mat4 placeQuadric(const Mat4& local, const Vec3d& origin, const std::array<Vec3d, 3>& frame);
 
+/// @brief The world Q, M^T Q M (symmetrized), of the quadric @a local of local points q, where
+/// [q 1] = M [p 1] for world points p (@a m, any affine map: its last row 0 0 0 1).
+Mat4 mapQuadric(const Mat4& local, const Mat4& m);
+
 /// @name Named quadrics: presets that produce a Q (all throw openvdb::ValueError on bad input)
 /// @{
 /// Half-space n.p < offset (stored with a unit normal, so it is an exact SDF).
