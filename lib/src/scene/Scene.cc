@@ -192,6 +192,10 @@ struct Node
     int depth;
     double band;
     bool lattice = true; // sampled at the raster's voxels only (no transform above)
+    /// The transforms directly above a mesh node (outermost first), which move its vertices
+    /// instead of its sample points (buildTransform()); @a placed of the depth is theirs.
+    std::vector<std::shared_ptr<const implicit::Transform>> placement = {};
+    int placed = 0;
 
     Node child(double childBand) const { return {scene, depth + 1, childBand, lattice}; }
 };
@@ -387,7 +391,8 @@ GridBuild gridBuild(ObjectReader& r, const std::string& type, const Node& node)
             "wider only, and the blend sees that band's edge value beyond");
         band = most;
     }
-    return {dx, std::max(band, 1.0), node.lattice ? (node.depth > 0 ? 2.0 : 0.0) : 3.0};
+    const bool whole = node.depth == node.placed; // the scene's shape, moved or not
+    return {dx, std::max(band, 1.0), node.lattice ? (whole ? 0.0 : 2.0) : 3.0};
 }
 
 /// What a mesh or vdb node stands for when the scene is only checked: a unit sphere, once
@@ -410,6 +415,19 @@ Implicit::Ptr buildMesh(ObjectReader& r, const std::string& type, const Node& no
         m = mesh::readTriangleMesh(file);
     } catch (const openvdb::Exception& e) {
         r.fail(r.childPath("file"), util::errorText(e));
+    }
+    // Transforms right above move the vertices (innermost first), in double precision.
+    for (auto t = node.placement.rbegin(); t != node.placement.rend(); ++t) {
+        for (openvdb::Vec3s& v : m.points) {
+            const Vec3d w = (*t)->toWorld(Vec3d(v));
+            if (!(std::abs(w[0]) < 1e30 && std::abs(w[1]) < 1e30 && std::abs(w[2]) < 1e30)) {
+                r.fail(r.childPath("file"), "the mesh in " + file + " moved by the transforms "
+                       "above it has a vertex beyond 1e30 (" + util::formatNumber(w[0]) + ", " +
+                       util::formatNumber(w[1]) + ", " + util::formatNumber(w[2]) + "); use a "
+                       "smaller scale or translation");
+            }
+            v = openvdb::Vec3s(w);
+        }
     }
     if (const std::size_t open = mesh::openEdges(m)) {
         node.scene.notes->push_back(file + ": the mesh is not closed (" + std::to_string(open) +
@@ -565,6 +583,21 @@ Implicit::Ptr buildShell(ObjectReader& r, const std::string&, const Node& node)
     return std::make_shared<implicit::Shell>(child, t);
 }
 
+/// Whether @a child is a mesh node, or a transform of one (a chain of transforms ending in a mesh).
+bool movesMesh(const json& child)
+{
+    const json* j = &child;
+    for (int depth = 0; depth <= kMaxDepth && j->is_object(); ++depth) {
+        const auto type = j->find("type");
+        if (type == j->end() || !type->is_string()) return false;
+        if (*type == "mesh") return true;
+        const auto next = j->find("child");
+        if (*type != "transform" || next == j->end()) return false;
+        j = &*next;
+    }
+    return false;
+}
+
 Implicit::Ptr buildTransform(ObjectReader& r, const std::string&, const Node& node)
 {
     Vec3d scale(1.0);
@@ -579,6 +612,19 @@ Implicit::Ptr buildTransform(ObjectReader& r, const std::string&, const Node& no
         }
     }
     const Vec3d t = r.vec3("translate", kZero), rot = r.vec3("rotate_deg", kZero);
+    if (movesMesh(r.raw("child"))) {
+        // A mesh moved is the moved mesh: its vertices take the map and its grid is built on
+        // the scene's lattice, exactly OpenVDB's meshToLevelSet of the moved mesh where nothing
+        // else moves it. Sampled through the map instead, the grid built in the mesh's own frame
+        // was interpolated between its voxels and, under a non-uniform scale, its flat facets'
+        // edges were left to the smooth iteration (docs/scene-format.md#meshes-and-vdb-files).
+        Node under = node.child(node.band);
+        under.placement = node.placement;
+        under.placement.push_back(std::make_shared<implicit::Transform>(
+            std::make_shared<implicit::Sphere>(kZero, 1.0), t, rot, scale));
+        under.placed = node.placed + 1;
+        return parseNode(r.raw("child"), r.childPath("child"), r.origin(), under);
+    }
     // The child's values are scaled by the smallest scale: its band must be that much wider.
     const double least = std::min({scale[0], scale[1], scale[2]});
     Node under = node.child(node.band / least);
