@@ -456,6 +456,16 @@ TEST_F(TestAssets, BadAssetsAreRefused)
     refused(R"({"type": "vdb", "file": "missing.vdb"})", "shape.file: ");
     refused(R"({"type": "vdb", "file": "fog.vdb"})", "fog");
     refused(R"({"type": "vdb", "file": "fog.vdb", "grid": "nosuch"})", "shape.grid: ");
+    // A mesh moved by a transform right above it: vertices beyond 1e30 are refused.
+    {
+        std::vector<openvdb::Vec3s> points;
+        std::vector<openvdb::Vec3I> tris;
+        boxMesh(Vec3d(-0.5), Vec3d(0.5), points, tris);
+        writeObj(path("cube.obj"), points, tris);
+    }
+    refused(R"({"type": "transform", "scale": 1e300, "child": {"type": "mesh", "file": "cube.obj"}})",
+            "shape.child.file: the mesh in " + path("cube.obj") +
+                " moved by the transforms above it has a vertex beyond 1e30");
     // Without a voxel size there is nothing to build the level set at.
     std::ofstream(path("novoxel.json")) << R"({"shape": {"type": "mesh", "file": "empty.obj"}})";
     try {
