@@ -6,7 +6,8 @@ Section "core" (rasterizing):
 
 Measures, in one run and interleaved so machine noise hits both sides alike:
   * compute: ivdb's sparse rasterizer vs openvdb::tools::createLevelSetSphere (Google Benchmark,
-    build/bin/ivdb_bench, median of repetitions);
+    build/bin/ivdb_bench, median of repetitions; it restarts itself with the launcher's heap
+    tunables, as the commands run, unless IVDB_HUGEPAGES=0 or GLIBC_TUNABLES names hugetlb);
   * end to end: `ivdb rasterize` vs `vdb_tool -sphere ... -write` (start, compute, write);
   * sparse vs dense: wall time and peak memory of `ivdb rasterize` at several resolutions.
 Section "csg" (two overlapping radius-400 spheres; also rendering one of them vs vdb_render):
