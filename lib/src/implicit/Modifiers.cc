@@ -1,9 +1,13 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Modifiers.h>
 
+#include <ivdb/implicit/Primitives.h>
+
 #include <openvdb/Exceptions.h>
 
+#include <algorithm>
 #include <cmath>
+#include <memory>
 #include <sstream>
 
 namespace ivdb::implicit {
@@ -22,6 +26,19 @@ BBoxd grown(const BBoxd& box, double d) { return BBoxd(box.min() - Vec3d(d), box
 
 // ---- Offset ---------------------------------------------------------------------------------
 
+Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
+{
+    // A box is the intersection of its slabs, and shrinking an intersection shrinks each part:
+    // the smaller box, whose edges stay sharp (the offset's own value, f - d, is not its
+    // distance near them).
+    if (const auto* b = dynamic_cast<const Box*>(child.get())) {
+        const Vec3d size = b->size() - Vec3d(2.0 * delta);
+        if (!(delta > 0.0) || !(std::min({size[0], size[1], size[2]}) > 0.0)) return nullptr;
+        return std::make_shared<Box>(b->center(), size);
+    }
+    return nullptr;
+}
+
 Offset::Offset(Ptr child, double distance): mChild(std::move(child)), mDistance(distance)
 {
     requireChild(mChild, "offset");
@@ -30,6 +47,7 @@ Offset::Offset(Ptr child, double distance): mChild(std::move(child)), mDistance(
         os << "offset distance must be finite, got " << distance;
         OPENVDB_THROW(openvdb::ValueError, os.str());
     }
+    if (distance < 0.0) mEroded = erodedShape(mChild, -distance);
 }
 
 double Offset::value(const Vec3d& p) const { return mChild->value(p) - mDistance; }
@@ -81,6 +99,7 @@ Shell::Shell(Ptr child, double thickness): mChild(std::move(child)), mHalf(0.5 *
         os << "shell thickness must be > 0 and finite, got " << thickness;
         OPENVDB_THROW(openvdb::ValueError, os.str());
     }
+    mEroded = erodedShape(mChild, mHalf);
 }
 
 double Shell::value(const Vec3d& p) const { return std::abs(mChild->value(p)) - mHalf; }

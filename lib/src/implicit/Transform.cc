@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Csg.h>
+#include <ivdb/implicit/Modifiers.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
 
@@ -114,6 +115,27 @@ void Transform::prepareSurface()
         m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
     }
     m[3][3] = 1.0;
+    if (const auto* o = dynamic_cast<const Offset*>(mChild.get()); o && o->eroded()) {
+        // A shrunk box is a smaller box (Offset::eroded()): the offset's surface is that box's,
+        // scaled (the route below).
+        const std::shared_ptr<Transform> t(new Transform(o->eroded(), *this));
+        mSurface = t->mSurface;
+        return;
+    }
+    if (const auto* sh = dynamic_cast<const Shell*>(mChild.get()); sh && sh->eroded()) {
+        // The shell's solid is the child grown by t/2 less the child shrunk by t/2 (the box's
+        // smaller box), each mapped with its own route: the smaller box's scaled box, exact; the
+        // grown box (rounded, smooth) the smooth iteration's. Inside, the inner surface's sharp
+        // edges were left to the smooth iteration, which answered voxels over a voxel off.
+        std::vector<Ptr> parts;
+        for (const Ptr& k : {Ptr(std::make_shared<Offset>(sh->child(), 0.5 * sh->thickness())),
+                             sh->eroded()}) {
+            const std::shared_ptr<Transform> t(new Transform(k, *this));
+            parts.push_back(t->mSurface ? t->mSurface : Ptr(t));
+        }
+        mSurface = std::make_shared<Csg>(Csg::Op::Difference, std::move(parts));
+        return;
+    }
     if (const auto* b = dynamic_cast<const Box*>(mChild.get())) {
         // The scale acts along the box's own axes: the box with centre S c and sides S size,
         // moved rigidly, an exact SDF.

@@ -36,9 +36,16 @@ public:
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "offset"; }
 
+    const Ptr& child() const { return mChild; }
+    double distance() const { return mDistance; }
+    /// @brief The shrunk shape as an exact SDF where one is known (a box shrunk by -d < half its
+    /// smallest side is the smaller box), else null: its foot points are this node's.
+    const Ptr& eroded() const { return mEroded; }
+
 private:
     Ptr mChild;
     double mDistance;
+    Ptr mEroded;
 };
 
 /// @brief A hollow shell of a shape, of thickness t centred on its surface: |f| - t/2.
@@ -68,9 +75,20 @@ public:
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "shell"; }
 
+    const Ptr& child() const { return mChild; }
+    double thickness() const { return 2.0 * mHalf; }
+    /// @brief The inner surface's solid (the child shrunk by t/2) as an exact SDF where one is
+    /// known (a box's smaller box), else null.
+    const Ptr& eroded() const { return mEroded; }
+
 private:
     Ptr mChild;
     double mHalf; // t/2
+    Ptr mEroded;
 };
+
+/// @brief @a child shrunk by @a delta > 0 (its points at least delta inside) as an exact SDF
+/// where one is known: a box's smaller box; null otherwise, or where nothing is left.
+Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta);
 
 } // namespace ivdb::implicit
