@@ -481,6 +481,72 @@ TEST_F(TestTrueDistances, ShrunkBoxAndShellOfABoxAreTheirClosedForms)
     }
 }
 
+TEST_F(TestTrueDistances, ShrunkAndShelledCappedCylindersAndConesAreExact)
+{
+    // A capped cylinder or cone is its cone between two slabs: shrunk by d, the caps move in by
+    // d and the side by d across (implicit::erodedShape()). The cylinder against closed forms in
+    // its frame (a rectangle's distance in axial and radial coordinates), shrunk and shelled,
+    // every voxel; the truncated cone's shrunk solid against the definition (inside it exactly
+    // where the cone's own exact distance is below -d) and its rasterized offset against it.
+    const double dx = 0.01, d = 0.05, t = 0.1;
+    const Vec3d a(-0.2, -0.3, 0.1), b(0.25, 0.3, -0.1);
+    const double r = 0.3, length = (b - a).length();
+    const Vec3d u = (b - a) / length;
+    // The rectangle [0, L] x [0, rho] in (s, radial distance), as the solid of revolution.
+    auto cylinder = [&](const Vec3d& p, double inset) {
+        const double s = (p - a).dot(u), rho = (p - a - u * s).length();
+        const double ds = std::abs(s - 0.5 * length) - (0.5 * length - inset), dr = rho - (r - inset);
+        return std::hypot(std::max(ds, 0.0), std::max(dr, 0.0)) + std::min(std::max(ds, dr), 0.0);
+    };
+    const auto cyl = std::make_shared<implicit::CappedCone>(a, b, r, r, "capped_cylinder");
+    for (const bool shell : {false, true}) {
+        implicit::Implicit::Ptr shape = shell
+            ? implicit::Implicit::Ptr(std::make_shared<implicit::Shell>(cyl, t))
+            : implicit::Implicit::Ptr(std::make_shared<implicit::Offset>(cyl, -d));
+        auto reference = [&](const Vec3d& p) {
+            if (!shell) return cylinder(p, d);
+            const double f = cylinder(p, 0.0), inner = cylinder(p, 0.5 * t);
+            if (f >= 0.0) return f - 0.5 * t;
+            if (inner < 0.0) return -inner;
+            return -std::min(0.5 * t - f, inner);
+        };
+        raster::RasterStats stats;
+        raster::RasterSettings s = settings(dx);
+        s.stats = &stats;
+        const auto g = raster::rasterize(shape, s);
+        const std::string what = shell ? "shell of a capped cylinder" : "capped cylinder shrunk";
+        const double worst = expectDistances(*g, reference, dx, 3.0, 1e-5, what,
+                                             implicit::BBoxd(Vec3d(-0.7), Vec3d(0.7)));
+        std::printf("%s: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n",
+                    what.c_str(), worst, (unsigned long long)stats.localDistances,
+                    (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
+                    (unsigned long long)stats.sweptDistances);
+        EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u);
+    }
+    const auto cone = std::make_shared<implicit::CappedCone>(a, b, 0.35, 0.15);
+    const implicit::Implicit::Ptr eroded = implicit::erodedShape(cone, d);
+    ASSERT_TRUE(eroded);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> box(-0.7, 0.7);
+    std::size_t disagree = 0, near = 0;
+    for (int i = 0; i < 200000; ++i) {
+        const Vec3d p(box(rng), box(rng), box(rng));
+        const double level = cone->value(p) + d, e = eroded->value(p);
+        if (std::abs(level) < 1e-9) continue;
+        disagree += (level < 0.0) != (e < 0.0);
+        near += std::abs(level) < 0.01;
+    }
+    EXPECT_EQ(disagree, 0u);
+    EXPECT_GT(near, 1000u);
+    const auto g = raster::rasterize(std::make_shared<implicit::Offset>(cone, -d), settings(dx));
+    const double worst = expectDistances(*g, [&](const Vec3d& p) { return eroded->value(p); }, dx,
+                                         3.0, 1e-5, "capped cone shrunk",
+                                         implicit::BBoxd(Vec3d(-0.7), Vec3d(0.7)));
+    std::printf("capped cone shrunk: worst error %.2g voxel\n", worst);
+    // Shrunk until a radius reaches 0 before its cap (a cone's tip): no exact shape.
+    EXPECT_FALSE(implicit::erodedShape(cone, 0.2));
+}
+
 TEST_F(TestTrueDistances, NonUniformScaleOfACappedCylinderOrConeIsItsQuadricBetweenItsCaps)
 {
     // A capped cylinder or cone scaled non-uniformly is the world quadric of its infinite cone

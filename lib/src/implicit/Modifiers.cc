@@ -36,6 +36,20 @@ Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
         if (!(delta > 0.0) || !(std::min({size[0], size[1], size[2]}) > 0.0)) return nullptr;
         return std::make_shared<Box>(b->center(), size);
     }
+    // A capped cylinder or cone is its (convex) cone between two slabs: shrunk, the caps move in
+    // by delta along the axis and the side by delta across it, which at a slope k = dr/ds takes
+    // delta sqrt(1 + k^2) off the radius. Where a radius would reach 0 before its cap (the
+    // shrunk solid a cone's tip), none here.
+    if (const auto* c = dynamic_cast<const CappedCone*>(child.get())) {
+        const double length = c->length() - 2.0 * delta;
+        if (!(delta > 0.0) || !(length > 0.0)) return nullptr;
+        const double k = (c->radiusB() - c->radiusA()) / c->length();
+        const double cut = delta * std::sqrt(1.0 + k * k);
+        const double ra = c->radiusA() + k * delta - cut, rb = c->radiusB() - k * delta - cut;
+        if (!(ra > 0.0) || !(rb > 0.0)) return nullptr;
+        const Vec3d a = c->a() + c->axis() * delta;
+        return std::make_shared<CappedCone>(a, a + c->axis() * length, ra, rb, c->typeName());
+    }
     return nullptr;
 }
 

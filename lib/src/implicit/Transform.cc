@@ -116,17 +116,19 @@ void Transform::prepareSurface()
     }
     m[3][3] = 1.0;
     if (const auto* o = dynamic_cast<const Offset*>(mChild.get()); o && o->eroded()) {
-        // A shrunk box is a smaller box (Offset::eroded()): the offset's surface is that box's,
-        // scaled (the route below).
+        // A shrunk box, capped cylinder or cone is a smaller one (Offset::eroded()): the
+        // offset's surface is that shape's, mapped by its route below (a box's scaled box, a
+        // capped cone's quadric between its caps).
         const std::shared_ptr<Transform> t(new Transform(o->eroded(), *this));
         mSurface = t->mSurface;
         return;
     }
     if (const auto* sh = dynamic_cast<const Shell*>(mChild.get()); sh && sh->eroded()) {
-        // The shell's solid is the child grown by t/2 less the child shrunk by t/2 (the box's
-        // smaller box), each mapped with its own route: the smaller box's scaled box, exact; the
-        // grown box (rounded, smooth) the smooth iteration's. Inside, the inner surface's sharp
-        // edges were left to the smooth iteration, which answered voxels over a voxel off.
+        // The shell's solid is the child grown by t/2 less the child shrunk by t/2 (a smaller
+        // box, capped cylinder or cone), each mapped with its own route: the smaller shape's
+        // below, exact; the grown one (rounded, smooth) the smooth iteration's. Inside, the
+        // inner surface's sharp edges were left to the smooth iteration, which answered voxels
+        // over a voxel off.
         std::vector<Ptr> parts;
         for (const Ptr& k : {Ptr(std::make_shared<Offset>(sh->child(), 0.5 * sh->thickness())),
                              sh->eroded()}) {

@@ -38,8 +38,8 @@ public:
 
     const Ptr& child() const { return mChild; }
     double distance() const { return mDistance; }
-    /// @brief The shrunk shape as an exact SDF where one is known (a box shrunk by -d < half its
-    /// smallest side is the smaller box), else null: its foot points are this node's.
+    /// @brief The shrunk shape as an exact SDF where one is known (erodedShape(): a box's
+    /// smaller box, a capped cylinder's or cone's), else null: its foot points are this node's.
     const Ptr& eroded() const { return mEroded; }
 
 private:
@@ -78,7 +78,7 @@ public:
     const Ptr& child() const { return mChild; }
     double thickness() const { return 2.0 * mHalf; }
     /// @brief The inner surface's solid (the child shrunk by t/2) as an exact SDF where one is
-    /// known (a box's smaller box), else null.
+    /// known (erodedShape()), else null.
     const Ptr& eroded() const { return mEroded; }
 
 private:
@@ -88,7 +88,8 @@ private:
 };
 
 /// @brief @a child shrunk by @a delta > 0 (its points at least delta inside) as an exact SDF
-/// where one is known: a box's smaller box; null otherwise, or where nothing is left.
+/// where one is known: a box's smaller box, a capped cylinder's or cone's shorter and thinner
+/// one; null otherwise, or where nothing (or a cone's tip) is left.
 Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta);
 
 } // namespace ivdb::implicit
