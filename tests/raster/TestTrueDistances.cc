@@ -387,6 +387,36 @@ TEST_F(TestTrueDistances, NonUniformScaleOfABoxIsTheScaledBox)
     EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u);
 }
 
+/// The signed distance to a shell of thickness @a t from the child's distance @a f and the
+/// child's shrunk by t/2, @a inner: the nearer of its two surfaces, negative in its material.
+double shellDistance(double f, double inner, double t)
+{
+    if (f >= 0.0) return f - 0.5 * t;      // the outer surface is the nearer
+    if (inner < 0.0) return -inner;        // the hollow: the inner is the nearer
+    return -std::min(0.5 * t - f, inner);  // the material: the nearer of the two
+}
+
+/// @a shape rasterized at @a dx: every voxel of the band within @a tol voxels of @a reference,
+/// each from foot points (none searched or swept). Returns the worst error.
+double expectLocalDistances(const implicit::Implicit::Ptr& shape,
+                            const std::function<double(const Vec3d&)>& reference, double dx,
+                            double tol, const std::string& what)
+{
+    raster::RasterStats stats;
+    raster::RasterSettings s = settings(dx);
+    s.stats = &stats;
+    const auto g = raster::rasterize(shape, s);
+    const double worst = expectDistances(*g, reference, dx, 3.0, tol, what,
+                                         implicit::BBoxd(Vec3d(-0.7), Vec3d(0.7)));
+    std::printf("%s: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n",
+                what.c_str(), worst, (unsigned long long)stats.localDistances,
+                (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
+                (unsigned long long)stats.sweptDistances);
+    EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u)
+        << what;
+    return worst;
+}
+
 /// The distance to the box of half sides @a half centred at the origin, in closed form.
 double centredBoxDistance(const Vec3d& q, const Vec3d& half)
 {
@@ -419,24 +449,11 @@ TEST_F(TestTrueDistances, ShrunkBoxAndShellOfABoxAreTheirClosedForms)
         auto reference = [&](const Vec3d& p) {
             const Vec3d q = shape->toLocal(p) - centre; // a rigid motion: distances kept
             if (!shell) return centredBoxDistance(q, half - Vec3d(d));
-            const double f = centredBoxDistance(q, half);
-            const double inner = centredBoxDistance(q, half - Vec3d(0.5 * t));
-            if (f >= 0.0) return f - 0.5 * t;         // the outer surface is the nearer
-            if (inner < 0.0) return -inner;           // the hollow: the inner is the nearer
-            return -std::min(0.5 * t - f, inner);     // the material: the nearer of the two
+            return shellDistance(centredBoxDistance(q, half),
+                                 centredBoxDistance(q, half - Vec3d(0.5 * t)), t);
         };
-        raster::RasterStats stats;
-        raster::RasterSettings s = settings(dx);
-        s.stats = &stats;
-        const auto g = raster::rasterize(shape, s);
-        const std::string what = shell ? "shell of a box" : "box shrunk";
-        const double worst = expectDistances(*g, reference, dx, 3.0, 1e-6, what,
-                                             implicit::BBoxd(Vec3d(-0.7), Vec3d(0.7)));
-        std::printf("%s, rotated: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n",
-                    what.c_str(), worst, (unsigned long long)stats.localDistances,
-                    (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
-                    (unsigned long long)stats.sweptDistances);
-        EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u);
+        expectLocalDistances(shape, reference, dx, 1e-6,
+                             shell ? "shell of a box, rotated" : "box shrunk, rotated");
     }
     // Scaled non-uniformly: the shrunk box is the scaled smaller box (a closed form, every
     // voxel); the shell's hollow is inside the scaled smaller box, whose surface is the nearer
@@ -504,24 +521,11 @@ TEST_F(TestTrueDistances, ShrunkAndShelledCappedCylindersAndConesAreExact)
             ? implicit::Implicit::Ptr(std::make_shared<implicit::Shell>(cyl, t))
             : implicit::Implicit::Ptr(std::make_shared<implicit::Offset>(cyl, -d));
         auto reference = [&](const Vec3d& p) {
-            if (!shell) return cylinder(p, d);
-            const double f = cylinder(p, 0.0), inner = cylinder(p, 0.5 * t);
-            if (f >= 0.0) return f - 0.5 * t;
-            if (inner < 0.0) return -inner;
-            return -std::min(0.5 * t - f, inner);
+            return shell ? shellDistance(cylinder(p, 0.0), cylinder(p, 0.5 * t), t)
+                         : cylinder(p, d);
         };
-        raster::RasterStats stats;
-        raster::RasterSettings s = settings(dx);
-        s.stats = &stats;
-        const auto g = raster::rasterize(shape, s);
-        const std::string what = shell ? "shell of a capped cylinder" : "capped cylinder shrunk";
-        const double worst = expectDistances(*g, reference, dx, 3.0, 1e-5, what,
-                                             implicit::BBoxd(Vec3d(-0.7), Vec3d(0.7)));
-        std::printf("%s: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n",
-                    what.c_str(), worst, (unsigned long long)stats.localDistances,
-                    (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
-                    (unsigned long long)stats.sweptDistances);
-        EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u);
+        expectLocalDistances(shape, reference, dx, 1e-5,
+                             shell ? "shell of a capped cylinder" : "capped cylinder shrunk");
     }
     const auto cone = std::make_shared<implicit::CappedCone>(a, b, 0.35, 0.15);
     const implicit::Implicit::Ptr eroded = implicit::erodedShape(cone, d);
