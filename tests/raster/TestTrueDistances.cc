@@ -455,6 +455,15 @@ TEST_F(TestTrueDistances, ShrunkBoxAndShellOfABoxAreTheirClosedForms)
         expectLocalDistances(shape, reference, dx, 1e-6,
                              shell ? "shell of a box, rotated" : "box shrunk, rotated");
     }
+    // The motion below the modifier: the shell of the moved box (the moved smaller box inside).
+    {
+        const auto moved = std::make_shared<implicit::Transform>(box, move, deg, Vec3d(1.0));
+        expectLocalDistances(std::make_shared<implicit::Shell>(moved, t), [&](const Vec3d& p) {
+            const Vec3d q = moved->toLocal(p) - centre;
+            return shellDistance(centredBoxDistance(q, half),
+                                 centredBoxDistance(q, half - Vec3d(0.5 * t)), t);
+        }, dx, 1e-6, "shell of a moved box");
+    }
     // Scaled non-uniformly: the shrunk box is the scaled smaller box (a closed form, every
     // voxel); the shell's hollow is inside the scaled smaller box, whose surface is the nearer
     // there (the outer one lies beyond it), so its voxels there have that box's distance.

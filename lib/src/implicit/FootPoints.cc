@@ -911,7 +911,11 @@ void Shell::footPoints(const double* x, const double* y, const double* z, const 
         for (std::size_t i = 0; i < n; ++i) sign[i] = 1.0;
         levelSetFeet(*mChild, x, y, z, f, sign, mHalf, n, query, out);
         for (std::size_t i = 0; i < n; ++i) {
-            if (f[i] >= 0.0 || !inner.ok[i]) continue; // outside the child: the outer is nearer
+            if (f[i] >= 0.0) continue; // outside the child: the outer is nearer
+            if (!inner.ok[i]) {
+                out.ok[i] = false; // the inner one may be the nearer: left to the iteration
+                continue;
+            }
             const double toOuter = -out.distance[i]; // t/2 - f > 0
             const double toInner = std::abs(inner.distance[i]);
             if (inner.distance[i] < 0.0 || !out.ok[i] || toInner < toOuter) {

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Modifiers.h>
 
+#include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 
 #include <openvdb/Exceptions.h>
@@ -35,6 +36,13 @@ Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
         const Vec3d size = b->size() - Vec3d(2.0 * delta);
         if (!(delta > 0.0) || !(std::min({size[0], size[1], size[2]}) > 0.0)) return nullptr;
         return std::make_shared<Box>(b->center(), size);
+    }
+    // A rigid motion or uniform scale s moves the shrunk child, shrunk by delta / s in its own
+    // units.
+    if (const auto* t = dynamic_cast<const Transform*>(child.get())) {
+        const double s = t->uniformScale();
+        const Implicit::Ptr inner = s > 0.0 ? erodedShape(t->child(), delta / s) : nullptr;
+        return inner ? t->moved(inner) : nullptr;
     }
     // A capped cylinder or cone is its (convex) cone between two slabs: shrunk, the caps move in
     // by delta along the axis and the side by delta across it, which at a slope k = dr/ds takes

@@ -381,6 +381,13 @@ bool Transform::isExactOutside() const
     return mChild->isExactOutside() && mScale[0] == mScale[1] && mScale[1] == mScale[2];
 }
 
+Implicit::Ptr Transform::moved(Ptr child) const { return Ptr(new Transform(std::move(child), *this)); }
+
+double Transform::uniformScale() const
+{
+    return mScale[0] == mScale[1] && mScale[1] == mScale[2] ? mScale[0] : 0.0;
+}
+
 bool Transform::isExactSdf() const
 {
     return mChild->isExactSdf() && mScale[0] == mScale[1] && mScale[1] == mScale[2];

@@ -108,6 +108,11 @@ public:
     Vec3d toLocal(const Vec3d& p) const;
     /// @brief The world point of child-space point @a q.
     Vec3d toWorld(const Vec3d& q) const;
+    const Ptr& child() const { return mChild; }
+    /// @brief The same map applied to @a child.
+    Ptr moved(Ptr child) const;
+    /// @brief The scale, if it is the same along every axis (distances scale by it); else 0.
+    double uniformScale() const;
 
 private:
     Transform(Ptr child, const Transform& like);

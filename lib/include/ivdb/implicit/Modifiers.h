@@ -87,9 +87,10 @@ private:
     Ptr mEroded;
 };
 
-/// @brief @a child shrunk by @a delta > 0 (its points at least delta inside) as an exact SDF
-/// where one is known: a box's smaller box, a capped cylinder's or cone's shorter and thinner
-/// one; null otherwise, or where nothing (or a cone's tip) is left.
+/// @brief @a child shrunk by @a delta > 0 (its points at least delta inside) as a shape with
+/// exact foot points where one is known: a box's smaller box, a capped cylinder's or cone's
+/// shorter and thinner one, and such a shape's rigid motion or uniform scale the shrunk shape
+/// moved; null otherwise, or where nothing (or a cone's tip) is left.
 Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta);
 
 } // namespace ivdb::implicit
