@@ -878,7 +878,7 @@ void Offset::footPoints(const double* x, const double* y, const double* z, const
     if (mEroded) {
         // The shrunk shape's own (an exact SDF: its distances and feet), with this node's
         // surface and sign. Moving along the child's gradient reaches the shrunk surface near
-        // its sharp edges only by the smooth iteration, which answered voxels up to 0.7 voxel
+        // its sharp edges only by the smooth iteration, which answered voxels up to 0.77 voxel
         // too far there.
         double own[kMaxBatch];
         mEroded->values(x, y, z, own, n);
@@ -916,9 +916,9 @@ void Shell::footPoints(const double* x, const double* y, const double* z, const 
                 out.ok[i] = false; // the inner one may be the nearer: left to the iteration
                 continue;
             }
-            const double toOuter = -out.distance[i]; // t/2 - f > 0
+            const double toOuter = -out.distance[i]; // t/2 - f > 0, exact however it landed
             const double toInner = std::abs(inner.distance[i]);
-            if (inner.distance[i] < 0.0 || !out.ok[i] || toInner < toOuter) {
+            if (inner.distance[i] < 0.0 || toInner < toOuter) {
                 // In the hollow (the outer is farther than the inner by t), or nearer the inner.
                 out.distance[i] = inner.distance[i] < 0.0 ? toInner : -toInner;
                 out.x[i] = inner.x[i], out.y[i] = inner.y[i], out.z[i] = inner.z[i];
