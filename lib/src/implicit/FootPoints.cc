@@ -740,10 +740,11 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
                            const double* values, std::size_t n, const FootQuery& query,
                            FootPoints& out) const
 {
-    if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2]) && mSurface) {
-        // A non-uniform scale of a sphere, a quadric, a box, a capped cylinder or cone, or a
-        // CSG node: the same surface's foot points (a world quadric's, a rigidly moved box's,
-        // the CSG's of a cone's quadric and cap planes, the CSG's of its children scaled), from
+    if (uniformScale() == 0.0 && mSurface) {
+        // A non-uniform scale of a sphere, a quadric, a box, a capped cylinder or cone, a CSG
+        // node, or an offset or shell with a shrunk shape (Offset::eroded()): the same
+        // surface's foot points (a world quadric's, a rigidly moved box's, the CSG's of a cone's
+        // quadric and cap planes, the CSG's of its children scaled, the shrunk shape's), from
         // its own values. Of an exact SDF child, a point that surface leaves uncertified (a
         // degenerate foot point deep inside) with |f| >= far is that far at least, as below.
         double sv[kMaxBatch];
@@ -758,7 +759,7 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
         }
         return;
     }
-    if (!(mScale[0] == mScale[1] && mScale[1] == mScale[2])) {
+    if (uniformScale() == 0.0) {
         // A non-uniform scale is not a rigid motion: the field itself, by the smooth iteration.
         // Of an exact SDF the field min(scale) child(q) is 1-Lipschitz (q moves by at most
         // 1 / min(scale) per unit of p), so |f| never exceeds the distance: a point with

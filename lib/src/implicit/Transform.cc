@@ -107,7 +107,7 @@ void Transform::prepareSurface()
 {
     // A rigid motion and uniform scale maps the child's own foot points (footPoints()); only a
     // non-uniform scale needs another route.
-    if (mScale[0] == mScale[1] && mScale[1] == mScale[2]) return;
+    if (uniformScale() > 0.0) return;
     // [q 1] = M [p 1] with M = [[S^-1 R^T, -S^-1 R^T t], [0 0 0 1]].
     Mat4 m{};
     for (int i = 0; i < 3; ++i) {
@@ -378,7 +378,7 @@ BBoxd Transform::boundingBox() const
 
 bool Transform::isExactOutside() const
 {
-    return mChild->isExactOutside() && mScale[0] == mScale[1] && mScale[1] == mScale[2];
+    return mChild->isExactOutside() && uniformScale() > 0.0;
 }
 
 Implicit::Ptr Transform::moved(Ptr child) const { return Ptr(new Transform(std::move(child), *this)); }
@@ -390,7 +390,7 @@ double Transform::uniformScale() const
 
 bool Transform::isExactSdf() const
 {
-    return mChild->isExactSdf() && mScale[0] == mScale[1] && mScale[1] == mScale[2];
+    return mChild->isExactSdf() && uniformScale() > 0.0;
 }
 
 Implicit::Ptr Transform::prune(const BBoxd& box) const

@@ -87,8 +87,9 @@ public:
     /// Rigid motion and uniform scale: the child's foot points mapped back. A non-uniform scale
     /// of a sphere or a quadric is a quadric, of a box a box with scaled sides, of a capped
     /// cylinder or cone the intersection of a quadric and two planes, of a CSG node the CSG of
-    /// its children transformed: that surface's foot points (Quadric::footPoints; the box's,
-    /// exact, under the rigid motion; Csg::footPoints); of any other child, the
+    /// its children transformed, of an offset or shell with a shrunk shape that shape's (or the
+    /// difference of the shell's two solids): that surface's foot points (Quadric::footPoints;
+    /// the box's, exact, under the rigid motion; Csg::footPoints); of any other child, the
     /// smooth iteration on this node's own field (of an exact SDF, only where |f| < far: the
     /// field is 1-Lipschitz, so |f| >= far is far enough).
     void footPoints(const double* x, const double* y, const double* z, const double* values,
@@ -121,7 +122,7 @@ private:
     /// The rigid motion of @a like (its rotation and translation) with unit scale.
     Transform(Ptr child, const Transform& like, bool rigid);
     /// mSurface, where the scale is not uniform and the child is a sphere, a quadric, a box, a
-    /// capped cylinder or cone, or a CSG node.
+    /// capped cylinder or cone, a CSG node, or an offset or shell with a shrunk shape.
     void prepareSurface();
     /// toLocal() of @a n points, into @a qx, @a qy, @a qz.
     void toLocal(const double* x, const double* y, const double* z, std::size_t n, double* qx,
