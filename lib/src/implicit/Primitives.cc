@@ -402,7 +402,9 @@ double CappedCone::distance(const Vec3d& p, double dir[2], Vec3d& radial) const
     }
     const bool inside = t >= 0.0 && t <= L && rho * L <= ra * L + (rb - ra) * t;
     const double d = std::sqrt(best), s = inside ? -1.0 : 1.0;
-    if (d > 0.0) {
+    // The direction from the nearest point, unless p is on the surface within rounding: there
+    // (rho, t) - (bx, by) is rounding noise, and the edge's normal is the gradient.
+    if (d > 1e-10 * (L + ra + rb)) {
         dir[0] = s * (rho - bx) / d;
         dir[1] = s * (t - by) / d;
     } else {
