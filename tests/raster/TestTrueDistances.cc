@@ -396,18 +396,19 @@ double shellDistance(double f, double inner, double t)
     return -std::min(0.5 * t - f, inner);  // the material: the nearer of the two
 }
 
-/// @a shape rasterized at @a dx: every voxel of the band within @a tol voxels of @a reference,
-/// each from foot points (none searched or swept). Returns the worst error.
+/// @a shape rasterized at @a dx: every voxel of the band (of the cube of half side @a reach)
+/// within @a tol voxels of @a reference, each from foot points (none searched or swept).
+/// Returns the worst error.
 double expectLocalDistances(const implicit::Implicit::Ptr& shape,
                             const std::function<double(const Vec3d&)>& reference, double dx,
-                            double tol, const std::string& what)
+                            double tol, const std::string& what, double reach = 0.7)
 {
     raster::RasterStats stats;
     raster::RasterSettings s = settings(dx);
     s.stats = &stats;
     const auto g = raster::rasterize(shape, s);
     const double worst = expectDistances(*g, reference, dx, 3.0, tol, what,
-                                         implicit::BBoxd(Vec3d(-0.7), Vec3d(0.7)));
+                                         implicit::BBoxd(Vec3d(-reach), Vec3d(reach)));
     std::printf("%s: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n",
                 what.c_str(), worst, (unsigned long long)stats.localDistances,
                 (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
@@ -427,6 +428,196 @@ double centredBoxDistance(const Vec3d& q, const Vec3d& half)
         inside = std::max(inside, d);
     }
     return std::sqrt(outside) + std::min(inside, 0.0);
+}
+
+/// A convex polyhedron as half-spaces n . x <= o (unit n).
+using HalfSpaces = std::vector<std::pair<Vec3d, double>>;
+
+/// The half-spaces of the box of @a size centred at @a centre, mapped by the rigid @a t.
+HalfSpaces boxHalfSpaces(const implicit::Transform& t, const Vec3d& centre, const Vec3d& size)
+{
+    HalfSpaces h;
+    const Vec3d origin = t.toWorld(Vec3d(0.0));
+    for (int k = 0; k < 3; ++k) {
+        for (double s : {1.0, -1.0}) {
+            Vec3d n(0.0);
+            n[k] = s;
+            const Vec3d rn = t.toWorld(n) - origin;
+            h.emplace_back(rn, s * centre[k] + 0.5 * size[k] + rn.dot(origin));
+        }
+    }
+    return h;
+}
+
+/// The distance from @a p to the convex polyhedron @a h (0 inside), as a convex program: the
+/// nearest point is p projected onto the intersection of the planes of its active constraints
+/// (at most three), so it is the nearest of those projections, over every set of one, two or
+/// three planes, that satisfies all the constraints. Nothing of the library's foot points.
+double convexDistance(const HalfSpaces& h, const Vec3d& p)
+{
+    const std::size_t m = h.size();
+    bool inside = true;
+    for (const auto& [n, o] : h) inside = inside && n.dot(p) <= o;
+    if (inside) return 0.0;
+    double best = std::numeric_limits<double>::max();
+    auto feasible = [&](const Vec3d& q) {
+        for (const auto& [n, o] : h) {
+            if (n.dot(q) > o + 1e-12) return false;
+        }
+        return true;
+    };
+    auto consider = [&](const Vec3d& q) {
+        if (feasible(q)) best = std::min(best, (p - q).length());
+    };
+    for (std::size_t a = 0; a < m; ++a) {
+        const auto& [na, oa] = h[a];
+        consider(p - na * (na.dot(p) - oa));
+        for (std::size_t b = a + 1; b < m; ++b) {
+            const auto& [nb, ob] = h[b];
+            // q = p - la na - lb nb on both planes: the 2x2 Gram system.
+            const double c = na.dot(nb), det = 1.0 - c * c;
+            if (det > 1e-12) {
+                const double fa = na.dot(p) - oa, fb = nb.dot(p) - ob;
+                consider(p - na * ((fa - c * fb) / det) - nb * ((fb - c * fa) / det));
+            }
+            for (std::size_t k = b + 1; k < m; ++k) {
+                // Three planes meet in one point (Cramer's rule), if their normals are
+                // independent.
+                const auto& [nk, ok] = h[k];
+                const double d3 = na.dot(nb.cross(nk));
+                if (std::abs(d3) > 1e-9) {
+                    consider((nb.cross(nk) * oa + nk.cross(na) * ob + na.cross(nb) * ok) / d3);
+                }
+            }
+        }
+    }
+    return best;
+}
+
+/// The depth of @a p inside the convex polyhedron @a h (its nearest plane; negative outside
+/// some plane).
+double convexDepth(const HalfSpaces& h, const Vec3d& p)
+{
+    double depth = std::numeric_limits<double>::max();
+    for (const auto& [n, o] : h) depth = std::min(depth, o - n.dot(p));
+    return depth;
+}
+
+TEST_F(TestTrueDistances, CsgOfBoxesIsTheDistanceToItsSurface)
+{
+    // The crease of two boxes kinks where it crosses either box's own edges, and near a kink the
+    // nearest surface point is that corner. A notch (a box minus a box over one of its corners),
+    // moved as a whole or each box on its own, and two boxes intersected, against the distance
+    // to convex polyhedra: a box minus a box B is the union of the box cut by each of B's faces'
+    // outer half-spaces (each convex); inside it the distance is the nearer of the box's faces
+    // and B; an intersection of boxes is one convex polyhedron. Before, the crease search walked
+    // a box's gradient across its edges and the lattice search took what it missed: 62, 27 and
+    // 117 voxels, up to 0.71, 0.66 and 1.3 voxel off, and band voxels missing.
+    const double dx = 0.01;
+    using implicit::Box;
+    using implicit::Csg;
+    using implicit::CsgOp;
+    using implicit::Transform;
+    using implicit::Implicit;
+    const Vec3d sa(1.0, 0.8, 0.6), cb(0.4, 0.3, 0.2), sb(0.5, 0.5, 0.5);
+    const Transform whole(std::make_shared<Box>(Vec3d(0.0), sa), Vec3d(0.0),
+                          Vec3d(10.0, 20.0, 30.0), Vec3d(1.0));
+    const Transform tilted(std::make_shared<Box>(Vec3d(0.0), sb), Vec3d(0.35, 0.25, 0.3),
+                           Vec3d(-25.0, 5.0, 40.0), Vec3d(1.0));
+    const Transform wide(std::make_shared<Box>(Vec3d(0.0), Vec3d(0.7, 0.9, 0.7)),
+                         Vec3d(0.2, 0.1, 0.1), Vec3d(-25.0, 5.0, 40.0), Vec3d(1.0));
+    auto moved = [](const Transform& t) { return t.moved(t.child()); };
+    const HalfSpaces a = boxHalfSpaces(whole, Vec3d(0.0), sa);
+    struct Case
+    {
+        std::string what;
+        Implicit::Ptr shape;
+        CsgOp op;
+        HalfSpaces b;
+    };
+    const std::vector<Case> cases{
+        {"notch moved as a whole",
+         whole.moved(std::make_shared<Csg>(CsgOp::Difference, std::vector<Implicit::Ptr>{
+             std::make_shared<Box>(Vec3d(0.0), sa), std::make_shared<Box>(cb, sb)})),
+         CsgOp::Difference, boxHalfSpaces(whole, cb, sb)},
+        {"tilted notch",
+         std::make_shared<Csg>(CsgOp::Difference, std::vector<Implicit::Ptr>{moved(whole), moved(tilted)}),
+         CsgOp::Difference, boxHalfSpaces(tilted, Vec3d(0.0), sb)},
+        {"intersection of boxes",
+         std::make_shared<Csg>(CsgOp::Intersection, std::vector<Implicit::Ptr>{moved(whole), moved(wide)}),
+         CsgOp::Intersection, boxHalfSpaces(wide, Vec3d(0.0), Vec3d(0.7, 0.9, 0.7))}};
+    for (const Case& c : cases) {
+        HalfSpaces both = a;
+        both.insert(both.end(), c.b.begin(), c.b.end());
+        const auto reference = [&](const Vec3d& p) {
+            // The CSG value is the distance inside, and a lower bound outside: beyond the band
+            // there, it is enough.
+            const double value = c.shape->value(p);
+            if (value >= 4.0 * dx) return value;
+            if (c.op == CsgOp::Intersection) {
+                const double depth = std::min(convexDepth(a, p), convexDepth(c.b, p));
+                return depth >= 0.0 ? -depth : convexDistance(both, p);
+            }
+            const double inA = convexDepth(a, p), inB = convexDepth(c.b, p);
+            if (inA >= 0.0 && inB < 0.0) return -std::min(inA, convexDistance(c.b, p));
+            double best = std::numeric_limits<double>::max();
+            for (const auto& [n, o] : c.b) {
+                HalfSpaces part = a;
+                part.emplace_back(-n, -o); // beyond that face of B
+                best = std::min(best, convexDistance(part, p));
+            }
+            return best;
+        };
+        const double worst = expectLocalDistances(c.shape, reference, dx, 1e-4, c.what, 0.8);
+        EXPECT_LT(worst, 1e-4) << c.what;
+    }
+}
+
+TEST_F(TestTrueDistances, PlateWithAHoleIsTheDistanceToItsSurface)
+{
+    // A plate minus a capped cylinder along z: through it (the crease is the two rims), and a
+    // blind hole (the cylinder's cap is the hole's floor, so the floor's rim, a sharp edge of the
+    // child itself, is an edge of the result), rotated. Near the hole the surface is symmetric
+    // about the hole's axis, so the distance is that of the plate's cross-section in the
+    // half-plane through the axis and p (rectangles there, in closed form); farther out it is the
+    // plate's (the hole lies beyond the band). Before, a capped cylinder's gradient on its own
+    // surface came from rounding noise (the direction from a nearest point at distance 1e-17):
+    // the crease search failed there, and each hole left about 470 voxels to the lattice
+    // search, up to 0.69 (through) and 0.75 voxel (blind) off.
+    const double dx = 0.01, h = 0.15, r = 0.15;
+    const Vec3d half(0.5, 0.4, h), axis(0.1, 0.05, 0.0);
+    for (const double floor : {-1.0, -0.05}) { // the hole's floor (below the plate: through)
+        const auto plate = std::make_shared<implicit::Csg>(implicit::CsgOp::Difference,
+            std::vector<implicit::Implicit::Ptr>{
+                std::make_shared<implicit::Box>(Vec3d(0.0), half * 2.0),
+                std::make_shared<implicit::CappedCone>(axis + Vec3d(0, 0, floor), axis + Vec3d(0, 0, 0.3),
+                                                       r, r, "capped_cylinder")});
+        const auto shape = std::make_shared<implicit::Transform>(plate, Vec3d(0.02, -0.01, 0.03),
+                                                                 Vec3d(10.0, 20.0, 30.0), Vec3d(1.0));
+        const auto reference = [&](const Vec3d& p) {
+            const Vec3d q = shape->toLocal(p);
+            const double box = centredBoxDistance(q, half);
+            const double rho = std::hypot(q[0] - axis[0], q[1] - axis[1]), z = q[2];
+            if (rho > r + 5.0 * dx) return box;
+            auto sq = [](double v) { return v * v; };
+            const bool inHole = rho < r && z > floor;
+            if (box <= 0.0 && !inHole) {
+                // The nearer of the plate's faces and the hole {rho < r, z > floor}.
+                return -std::min(-box, std::sqrt(sq(std::max(rho - r, 0.0)) +
+                                                 sq(std::max(floor - z, 0.0))));
+            }
+            // Outside: the nearer of the plate beyond the hole's wall and the floor's slab.
+            double d = std::sqrt(sq(std::max(r - rho, 0.0)) + sq(std::max(std::abs(z) - h, 0.0)));
+            if (floor > -h) {
+                d = std::min(d, std::sqrt(sq(std::max(rho - r, 0.0)) +
+                                          sq(z - std::clamp(z, -h, floor))));
+            }
+            return d;
+        };
+        const std::string what = floor > -h ? "blind hole" : "through hole";
+        const double worst = expectLocalDistances(shape, reference, dx, 1e-4, what);
+        EXPECT_LT(worst, 1e-4) << what;
+    }
 }
 
 TEST_F(TestTrueDistances, ShrunkBoxAndShellOfABoxAreTheirClosedForms)

@@ -273,12 +273,75 @@ bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, doub
 
 namespace {
 
+/// A smooth piece of a CSG term's surface, as the crease and corner searches see it: the whole
+/// term (@a f, a smooth surface), or a plane n . q = offset (@a f null, @a n a unit normal) that
+/// holds a face of a polyhedral term (polyhedralPlanes()).
+struct Piece
+{
+    const Implicit* f = nullptr;
+    Vec3d n;
+    double offset = 0.0;
+
+    double value(const Vec3d& q) const { return f ? f->value(q) : dot(n, q) - offset; }
+    Vec3d gradient(const Vec3d& q) const { return f ? f->gradient(q) : n; }
+};
+
+/// A polyhedral CSG term with more planes than this (eight boxes) is searched as one piece.
+constexpr std::size_t kMaxTermPlanes = 48;
+
+/// The planes that hold every face of @a f, if @a f is polyhedral: a box (its six faces), a
+/// CSG node of polyhedral children, or one of those moved rigidly or scaled uniformly. Appends
+/// them to @a out and returns true; false (nothing appended) for any other shape. Where such a
+/// term meets another, the crease is a chain of pieces that kinks at the term's own edges, and
+/// the nearest point of it is often a kink: searched plane by plane (and edge by edge), every
+/// piece in closed form.
+bool polyhedralPlanes(const Implicit& f, std::vector<Piece>& out)
+{
+    if (const auto* box = dynamic_cast<const Box*>(&f)) {
+        const Vec3d c = box->center(), h = box->size() * 0.5;
+        for (int k = 0; k < 3; ++k) {
+            Piece plus, minus;
+            plus.n = minus.n = Vec3d(0.0);
+            plus.n[k] = 1.0;
+            plus.offset = c[k] + h[k];
+            minus.n[k] = -1.0;
+            minus.offset = h[k] - c[k];
+            out.push_back(plus);
+            out.push_back(minus);
+        }
+        return true;
+    }
+    const std::size_t before = out.size();
+    if (const auto* t = dynamic_cast<const Transform*>(&f)) {
+        const double s = t->uniformScale();
+        if (!(s > 0.0) || !polyhedralPlanes(*t->child(), out)) return false;
+        // n . q = o with q = R^T (w - t) / s: (R n) . w = s o + (R n) . t.
+        const Vec3d origin = t->toWorld(Vec3d(0.0));
+        for (std::size_t k = before; k < out.size(); ++k) {
+            const Vec3d rn = (t->toWorld(out[k].n) - origin) / s;
+            out[k].n = rn / rn.length();
+            out[k].offset = s * out[k].offset + dot(out[k].n, origin);
+        }
+        return true;
+    }
+    if (const auto* csg = dynamic_cast<const Csg*>(&f)) {
+        for (const auto& child : csg->children()) {
+            if (!polyhedralPlanes(*child, out)) {
+                out.resize(before);
+                return false;
+            }
+        }
+        return true;
+    }
+    return false;
+}
+
 /// The point of the crease {a = 0} and {b = 0} closest to @a p, from @a start: rounds of a
 /// Gauss-Newton step onto both surfaces (the smallest move that zeroes both linearized values)
 /// and a move along the crease's tangent to the foot of the perpendicular from p, until
 /// converged (kConverged). Certified when q is on both surfaces and p - q is perpendicular to
 /// the crease, within @a tol.
-bool creasePoint(const Implicit& a, const Implicit& b, const Vec3d& p, Vec3d q, double tol,
+bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double tol,
                  Vec3d& out)
 {
     for (int round = 0; round < kMaxRounds; ++round) {
@@ -328,12 +391,21 @@ Crease sphereCrease(const Sphere& a, const Sphere& b, const Vec3d& p, Vec3d& out
 }
 
 /// The nearest point of the crease of @a a and @a b to @a p: in closed form for two spheres
-/// (@a sa and @a sb, null for other shapes), else by creasePoint() from @a start.
-Crease nearestCreasePoint(const Implicit& a, const Implicit& b, const Sphere* sa,
-                          const Sphere* sb, const Vec3d& p, const Vec3d& start, double tol,
-                          Vec3d& out)
+/// (@a sa and @a sb, null for other shapes) and for two planes (their line, none if they are
+/// parallel), else by creasePoint() from @a start.
+Crease nearestCreasePoint(const Piece& a, const Piece& b, const Sphere* sa, const Sphere* sb,
+                          const Vec3d& p, const Vec3d& start, double tol, Vec3d& out)
 {
     if (sa && sb) return sphereCrease(*sa, *sb, p, out);
+    if (!a.f && !b.f) {
+        // The least move from p onto both planes: p - la n_a - lb n_b, with [1 c; c 1] [la lb]
+        // = [f_a f_b] (c = n_a . n_b), lands on the foot of the perpendicular from p.
+        const double c = dot(a.n, b.n), det = 1.0 - c * c;
+        if (!(det > 1e-12)) return Crease::None;
+        const double fa = a.value(p), fb = b.value(p);
+        out = p - a.n * ((fa - fb * c) / det) - b.n * ((fb - fa * c) / det);
+        return Crease::Found;
+    }
     return creasePoint(a, b, p, start, tol, out) ? Crease::Found : Crease::Failed;
 }
 
@@ -373,7 +445,7 @@ int sphereCorners(const std::array<const Sphere*, 3>& s, Vec3d out[2])
 
 /// The point where the surfaces of @a f[0..2] meet nearest @a start: Newton's method on the
 /// three values (a 3x3 system a step). Certified when q is on all three within @a tol.
-bool cornerPoint(const std::array<const Implicit*, 3>& f, Vec3d q, double tol, Vec3d& out)
+bool cornerPoint(const std::array<const Piece*, 3>& f, Vec3d q, double tol, Vec3d& out)
 {
     for (int round = 0; round < kMaxRounds; ++round) {
         Vec3d g[3];
@@ -414,10 +486,18 @@ public:
     CsgTerms(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
              const double* y, const double* z, std::size_t n, const FootQuery& query)
         : mChildren(children), mOp(op), mX(x), mY(y), mZ(z), mQuery(query),
-          mN(n), mValues(new double[children.size() * n]), mFeet(children.size())
+          mN(n), mValues(new double[children.size() * n]), mFeet(children.size()),
+          mWhole(children.size()), mPlanes(children.size())
     {
         for (std::size_t c = 0; c < children.size(); ++c) {
             mSphere.push_back(dynamic_cast<const Sphere*>(children[c].get()));
+            mWhole[c].f = children[c].get();
+            // Planes are searched one by one: a term of many (a union of many boxes) is
+            // searched whole instead, its crease by the iteration.
+            if (!mSphere[c] && polyhedralPlanes(*children[c], mPlanes[c]) &&
+                mPlanes[c].size() > kMaxTermPlanes) {
+                mPlanes[c].clear();
+            }
             children[c]->values(x, y, z, value(c), n);
             if (children[c]->isExactSdf()) continue;
             mFeet[c] = std::make_unique<FootPoints>();
@@ -474,11 +554,20 @@ public:
     /// Inside the union at point @a i (deepest term value @a u), near a crease: the nearest point
     /// of the union's surface is a term's foot point, a point of the crease of two terms or a
     /// corner of three, that lies outside every other term. Only terms whose surface is within
-    /// reach can offer one. Writes the distance (at most far) and that point; returns whether
-    /// certified.
+    /// reach can offer one. A polyhedral term's surface is cut into its faces' planes: the foot
+    /// of the perpendicular on each, the crease of each two pieces (the term's own edges among
+    /// them) and the corner of each three, where such a point lies on the term's surface. Writes
+    /// the distance (at most far) and that point; returns whether certified.
     bool nearestInside(std::size_t i, double u, double& depth, Vec3d& nearest);
 
 private:
+    /// Point @a q lies on term @a c's surface, within the tolerance (a polyhedral term: its
+    /// value is an exact distance outside and a lower bound inside, zero only on its surface).
+    bool onTerm(std::size_t c, const Vec3d& q) const
+    {
+        return std::abs(mChildren[c]->value(q)) <= mQuery.tolerance;
+    }
+
     /// Outside every term at q, within the tolerance (the terms in @a on excepted), for the
     /// query point @a p. Only the terms within reach (mNear) are asked when q is within far of
     /// p: any other term is at least far outside at p, so still outside at q (1-Lipschitz).
@@ -521,8 +610,20 @@ private:
     std::unique_ptr<double[]> mValues; // a row of n per child, written before it is read
     std::vector<std::unique_ptr<FootPoints>> mFeet;
     std::vector<const Sphere*> mSphere; // the children that are spheres (closed forms), else null
+    std::vector<Piece> mWhole;                // each child as one piece
+    std::vector<std::vector<Piece>> mPlanes;  // a polyhedral child's planes, else empty
     std::vector<std::size_t> mNear; // reused across points
     std::vector<Vec3d> mNearFeet;   // their foot points (where found), as mNear
+    /// A piece within reach of the point: of term @a term, no point of it on the term's surface
+    /// nearer than @a bound, its search starting from @a start.
+    struct NearPiece
+    {
+        const Piece* piece;
+        std::size_t term;
+        double bound;
+        Vec3d start;
+    };
+    std::vector<NearPiece> mPieces; // reused across points
 };
 
 /// The least of @a m rows of signed terms s_c v_c (@a rows, @a signs) and the next, at @a n
@@ -570,10 +671,15 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     double best = std::numeric_limits<double>::max();
     nearest = p;
     bool complete = true; // every candidate was found
-    // Every term within reach a sphere: feet, creases and corners all in closed form, so finding
-    // none outside the other terms proves the nearest surface point lies beyond far.
-    bool closedForms = true;
-    for (std::size_t c : mNear) closedForms = closedForms && mSphere[c] != nullptr;
+    // Every term within reach a sphere, or every one polyhedral: feet, creases and corners all
+    // in closed form (each crease and corner of planes is one point), so finding none outside
+    // the other terms proves the nearest surface point lies beyond far.
+    bool spheres = true, polyhedra = true;
+    for (std::size_t c : mNear) {
+        spheres = spheres && mSphere[c] != nullptr;
+        polyhedra = polyhedra && !mPlanes[c].empty();
+    }
+    const bool closedForms = spheres || polyhedra;
     auto offer = [&](const Vec3d& q) {
         const double d = (p - q).length();
         if (d < best) best = d, nearest = q;
@@ -585,35 +691,66 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
         if (!foot(c, i, q)) complete = false;
         else if (outsideOthers(p, q, {c})) offer(q);
     }
-    auto beyond = [&](std::size_t c) { return std::abs(distance(c, i)) >= best; };
-    for (std::size_t a = 0; a < mNear.size() && !beyond(mNear[a]); ++a) {
-        for (std::size_t b = a + 1; b < mNear.size() && !beyond(mNear[b]); ++b) {
-            const std::size_t ca = mNear[a], cb = mNear[b];
+    // The pieces within reach, nearest first: a smooth term whole, a polyhedral term's planes
+    // (a point of the term's surface on one is at least as far as the plane and as that surface;
+    // the foot of the perpendicular on a plane is a candidate where it lies within a face).
+    mPieces.clear();
+    for (std::size_t a = 0; a < mNear.size(); ++a) {
+        const std::size_t c = mNear[a];
+        const double dc = std::abs(distance(c, i));
+        if (mPlanes[c].empty()) {
+            mPieces.push_back({&mWhole[c], c, dc, mNearFeet[a]});
+            continue;
+        }
+        for (const Piece& plane : mPlanes[c]) {
+            const double f = plane.value(p), bound = std::max(dc, std::abs(f));
+            if (bound >= std::min(best, mQuery.far)) continue;
+            const Vec3d q = p - plane.n * f;
+            mPieces.push_back({&plane, c, bound, q});
+            if (onTerm(c, q) && outsideOthers(p, q, {c})) offer(q);
+        }
+    }
+    std::stable_sort(mPieces.begin(), mPieces.end(),
+                     [](const NearPiece& l, const NearPiece& r) { return l.bound < r.bound; });
+    // A point found on a piece lies on its term's surface: a whole term's by construction, a
+    // plane's where the term's value there is zero (within a face or on its edges).
+    auto onPieces = [&](std::initializer_list<const NearPiece*> pieces, const Vec3d& q) {
+        for (const NearPiece* e : pieces) {
+            if (!e->piece->f && !onTerm(e->term, q)) return false;
+        }
+        return true;
+    };
+    auto sphereOf = [&](const NearPiece& e) { return e.piece->f ? mSphere[e.term] : nullptr; };
+    auto beyond = [&](const NearPiece& e) { return e.bound >= best; };
+    for (std::size_t a = 0; a < mPieces.size() && !beyond(mPieces[a]); ++a) {
+        const NearPiece& pa = mPieces[a];
+        for (std::size_t b = a + 1; b < mPieces.size() && !beyond(mPieces[b]); ++b) {
+            const NearPiece& pb = mPieces[b];
             Vec3d q;
-            const Crease crease = nearestCreasePoint(*mChildren[ca], *mChildren[cb], mSphere[ca],
-                                                     mSphere[cb], p, mNearFeet[a],
+            const Crease crease = nearestCreasePoint(*pa.piece, *pb.piece, sphereOf(pa),
+                                                     sphereOf(pb), p, pa.start,
                                                      mQuery.tolerance, q);
             if (crease == Crease::None) continue; // the two surfaces do not meet
             if (crease == Crease::Failed) {
                 complete = false;
                 continue;
             }
-            if (outsideOthers(p, q, {ca, cb})) offer(q);
+            if (onPieces({&pa, &pb}, q) && outsideOthers(p, q, {pa.term, pb.term})) offer(q);
             // Where a third surface cuts this crease: a corner (both of three spheres' in
             // closed form, else the one Newton's method finds from q).
-            for (std::size_t k = b + 1; k < mNear.size() && !beyond(mNear[k]); ++k) {
-                const std::size_t cc = mNear[k];
-                const std::array<const Implicit*, 3> f{mChildren[ca].get(), mChildren[cb].get(),
-                                                       mChildren[cc].get()};
+            for (std::size_t k = b + 1; k < mPieces.size() && !beyond(mPieces[k]); ++k) {
+                const NearPiece& pk = mPieces[k];
                 Vec3d corners[2];
-                const int found = sphereCorners({mSphere[ca], mSphere[cb], mSphere[cc]}, corners);
-                if (found >= 0) {
-                    for (int c = 0; c < found; ++c) {
-                        if (outsideOthers(p, corners[c], {ca, cb, cc})) offer(corners[c]);
+                const int found = sphereCorners({sphereOf(pa), sphereOf(pb), sphereOf(pk)},
+                                                corners);
+                const int count = found >= 0 ? found
+                                : cornerPoint({pa.piece, pb.piece, pk.piece}, q,
+                                              mQuery.tolerance, corners[0]) ? 1 : 0;
+                for (int c = 0; c < count; ++c) {
+                    if (onPieces({&pa, &pb, &pk}, corners[c]) &&
+                        outsideOthers(p, corners[c], {pa.term, pb.term, pk.term})) {
+                        offer(corners[c]);
                     }
-                } else if (cornerPoint(f, q, mQuery.tolerance, corners[0]) &&
-                           outsideOthers(p, corners[0], {ca, cb, cc})) {
-                    offer(corners[0]);
                 }
             }
         }
