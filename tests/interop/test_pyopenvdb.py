@@ -273,6 +273,76 @@ class PyopenvdbReadsIvdb(ic.TempDirTestCase):
                 self.assertGreater(near.sum(), 100)
                 self.assertLess(np.abs(values[near] - estimate[near]).max(), 0.5 * DX)
 
+    def testShrunkNotchIsNeverFartherThanItsSurface(self):
+        """`offset` -0.05 of a box minus a box over one of its corners, rotated: the smaller box
+        minus the notch grown by 0.05 (a rounded box). Against 2 M points of that surface (the
+        smaller box's faces outside the grown notch, the grown notch's surface inside the smaller
+        box, 1.5e-3 apart): no voxel farther than its nearest surface point (before: 2,922
+        voxels up to 0.8 voxel too far), none nearer than the samples' spacing allows, signs
+        right, and the band whole."""
+        from scipy.spatial import cKDTree
+        dx, delta, h = 0.01, 0.05, 0.0015
+        bigC, bigHalf = np.zeros(3), np.array([1.0, 0.8, 0.6]) / 2
+        cutC, cutHalf = np.array([0.4, 0.3, 0.2]), np.array([0.25, 0.25, 0.25])
+        rotate = [10.0, 20.0, 30.0]
+        scene = ic.writeJson(self.path("notch_offset.json"), {
+            "voxel_size": dx, "shape": {"type": "transform", "rotate_deg": rotate, "child": {
+                "type": "offset", "distance": -delta, "child": {"type": "difference", "children": [
+                    {"type": "box", "center": list(bigC), "size": list(bigHalf * 2)},
+                    {"type": "box", "center": list(cutC), "size": list(cutHalf * 2)}]}}}})
+        out = self.path("notch_offset.vdb")
+        ic.ivdb("rasterize", scene, "-o", out, "-q")
+        ijk, values = ic.activeVoxels(ic.readGrids(out)["surface"])
+
+        def boxDist(p, c, half):
+            q = np.abs(p - c) - half
+            return np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(axis=1), 0)
+
+        def faces(c, half, step):
+            pts = []
+            for k in range(3):
+                u, v = [e for e in range(3) if e != k]
+                gu, gv = (np.linspace(c[e] - half[e], c[e] + half[e],
+                                      int(np.ceil(2 * half[e] / step)) + 1) for e in (u, v))
+                U, V = np.meshgrid(gu, gv, indexing="ij")
+                for s in (-1.0, 1.0):
+                    p = np.zeros((U.size, 3))
+                    p[:, u], p[:, v], p[:, k] = U.ravel(), V.ravel(), c[k] + s * half[k]
+                    pts.append(p)
+            return np.concatenate(pts)
+
+        inner = bigHalf - delta
+        smaller = faces(bigC, inner, h)
+        smaller = smaller[boxDist(smaller, cutC, cutHalf) >= delta]
+        # The grown notch's surface: each point of the box grown by delta moved onto it along
+        # the direction from its nearest point of the notch (flat faces stay h/2 apart, the
+        # rounded edges and corners closer).
+        grown = faces(cutC, cutHalf + delta, h / 2)
+        foot = np.clip(grown, cutC - cutHalf, cutC + cutHalf)
+        away = grown - foot
+        grown = foot + away * (delta / np.linalg.norm(away, axis=1)[:, None])
+        grown = grown[boxDist(grown, bigC, inner) <= 0]
+        tree = cKDTree(np.concatenate([smaller, grown]))
+        a, b, c = np.radians(rotate)
+        rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+        ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+        rz = np.array([[np.cos(c), -np.sin(c), 0], [np.sin(c), np.cos(c), 0], [0, 0, 1]])
+        local = (ijk * dx) @ (rz @ ry @ rx)  # R^T p, row by row
+        nearest, _ = tree.query(local)
+        excess = (np.abs(values) - nearest) / dx
+        self.assertLess(excess.max(), 1e-4)                 # never farther than the surface
+        self.assertGreater(excess.min(), -h / np.sqrt(2) / dx)  # a sample within h / sqrt(2)
+        inside = (boxDist(local, bigC, inner) < 0) & (boxDist(local, cutC, cutHalf) > delta)
+        clear = nearest > h
+        self.assertTrue(np.all((values[clear] < 0) == inside[clear]))
+        # The band whole: every voxel of a cube around the shape within 3 voxels (less the
+        # samples' spacing) of the surface samples is active.
+        r = np.arange(-64, 65)  # the smaller box's half diagonal is 58 voxels
+        every = np.stack(np.meshgrid(r, r, r, indexing="ij"), -1).reshape(-1, 3)
+        d, _ = tree.query((every * dx) @ (rz @ ry @ rx), distance_upper_bound=3 * dx)
+        want = {tuple(v) for v in every[d < 3 * dx - h].tolist()}
+        self.assertEqual(want - set(map(tuple, ijk.tolist())), set())
+
     def testGradientIsTheCentralDifferenceOfTheClampedDistance(self):
         """(phi(x + K) - phi(x - K)) / (2 K dx) per axis, phi the sphere's distance clamped to
         the band (neighbours outside it read the clamped background), at every active voxel."""

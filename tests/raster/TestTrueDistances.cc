@@ -573,6 +573,64 @@ TEST_F(TestTrueDistances, CsgOfBoxesIsTheDistanceToItsSurface)
     }
 }
 
+TEST_F(TestTrueDistances, ShrunkIntersectionOfBoxesIsTheIntersectionOfTheShrunkBoxes)
+{
+    // A point is delta inside an intersection exactly when it is delta inside each part: an
+    // offset -delta of two rotated boxes intersected is the intersection of the two boxes shrunk
+    // (erodedShape()), a convex polyhedron, every voxel from its foot points. Before, the offset
+    // walked the intersection's field: 21,207 voxels to the lattice search, up to 0.91 voxel off,
+    // band voxels missing.
+    const double dx = 0.01, delta = 0.05;
+    using implicit::Box;
+    using implicit::Transform;
+    const Vec3d sa(1.0, 0.8, 0.3), sb(0.5, 1.2, 0.9);
+    const Transform ta(std::make_shared<Box>(Vec3d(0.0), sa), Vec3d(0.0), Vec3d(10.0, 20.0, 30.0),
+                       Vec3d(1.0));
+    const Transform tb(std::make_shared<Box>(Vec3d(0.0), sb), Vec3d(0.1, 0.0, 0.05),
+                       Vec3d(-25.0, 5.0, 40.0), Vec3d(1.0));
+    const auto shape = std::make_shared<implicit::Offset>(
+        std::make_shared<implicit::Csg>(implicit::CsgOp::Intersection,
+            std::vector<implicit::Implicit::Ptr>{ta.moved(ta.child()), tb.moved(tb.child())}),
+        -delta);
+    HalfSpaces both = boxHalfSpaces(ta, Vec3d(0.0), sa - Vec3d(2.0 * delta));
+    const HalfSpaces b = boxHalfSpaces(tb, Vec3d(0.0), sb - Vec3d(2.0 * delta));
+    both.insert(both.end(), b.begin(), b.end());
+    const auto reference = [&](const Vec3d& p) {
+        // The offset's value, max of the boxes' distances plus delta, is at most the distance
+        // outside (a point of the shrunk boxes is delta inside them): beyond the band, enough.
+        const double value = shape->value(p);
+        if (value >= 4.0 * dx) return value;
+        const double depth = convexDepth(both, p);
+        return depth >= 0.0 ? -depth : convexDistance(both, p);
+    };
+    const double worst = expectLocalDistances(shape, reference, dx, 1e-4, "shrunk intersection");
+    EXPECT_LT(worst, 1e-4);
+}
+
+TEST_F(TestTrueDistances, ShrunkRoundedBoxIsASmallerRoundedBoxOrABox)
+{
+    // A rounded box is its inner box grown by its radius r: shrunk by d < r, the rounded box of
+    // radius r - d; by d > r, the inner box shrunk by d - r, its edges sharp. Rotated, against
+    // those closed forms. Before, shrunk by more than its radius (0.08 > 0.05), the offset
+    // walked the rounded box's field: 7,108 voxels to the lattice search, up to 0.80 voxel off.
+    const double dx = 0.01, r = 0.05;
+    const Vec3d size(1.0, 0.8, 0.6);
+    for (const double d : {0.03, 0.08}) {
+        const auto shape = std::make_shared<implicit::Transform>(
+            std::make_shared<implicit::Offset>(std::make_shared<implicit::RoundedBox>(Vec3d(0.0), size, r), -d),
+            Vec3d(0.02, -0.01, 0.03), Vec3d(10.0, 20.0, 30.0), Vec3d(1.0));
+        const auto reference = [&](const Vec3d& p) {
+            const Vec3d q = shape->toLocal(p);
+            return d < r ? centredBoxDistance(q, size * 0.5 - Vec3d(r)) - (r - d)
+                         : centredBoxDistance(q, size * 0.5 - Vec3d(d));
+        };
+        const std::string what = d < r ? "rounded box shrunk by less than its radius"
+                                       : "rounded box shrunk by more than its radius";
+        const double worst = expectLocalDistances(shape, reference, dx, 1e-6, what);
+        EXPECT_LT(worst, 1e-6) << what;
+    }
+}
+
 TEST_F(TestTrueDistances, PlateWithAHoleIsTheDistanceToItsSurface)
 {
     // A plate minus a capped cylinder along z: through it (the crease is the two rims), and a

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <memory>
 #include <sstream>
+#include <vector>
 
 namespace ivdb::implicit {
 
@@ -27,14 +28,59 @@ BBoxd grown(const BBoxd& box, double d) { return BBoxd(box.min() - Vec3d(d), box
 
 // ---- Offset ---------------------------------------------------------------------------------
 
+Implicit::Ptr dilatedShape(const Implicit::Ptr& child, double delta)
+{
+    if (!(delta > 0.0)) return nullptr;
+    if (const auto* s = dynamic_cast<const Sphere*>(child.get())) {
+        return std::make_shared<Sphere>(s->center(), s->radius() + delta);
+    }
+    // The points within delta of a box: the box of sides size + 2 delta with its edges and
+    // corners rounded by delta.
+    if (const auto* b = dynamic_cast<const Box*>(child.get())) {
+        return std::make_shared<RoundedBox>(b->center(), b->size() + Vec3d(2.0 * delta), delta);
+    }
+    if (const auto* t = dynamic_cast<const Transform*>(child.get())) {
+        const double s = t->uniformScale();
+        const Implicit::Ptr outer = s > 0.0 ? dilatedShape(t->child(), delta / s) : nullptr;
+        return outer ? t->moved(outer) : nullptr;
+    }
+    // Growing a union grows each part.
+    if (const auto* c = dynamic_cast<const Csg*>(child.get()); c && c->op() == CsgOp::Union) {
+        std::vector<Implicit::Ptr> parts;
+        for (const auto& part : c->children()) {
+            parts.push_back(dilatedShape(part, delta));
+            if (!parts.back()) return nullptr;
+        }
+        return std::make_shared<Csg>(CsgOp::Union, std::move(parts));
+    }
+    return nullptr;
+}
+
 Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
 {
+    if (!(delta > 0.0)) return nullptr;
+    // A sphere's smaller sphere (on its own, its offset is exact anyway; as a part of a CSG
+    // node below, it has to be a shape of its own).
+    if (const auto* s = dynamic_cast<const Sphere*>(child.get())) {
+        return s->radius() > delta ? std::make_shared<Sphere>(s->center(), s->radius() - delta)
+                                   : nullptr;
+    }
+    // A rounded box is its inner box grown by its radius r: shrunk by delta < r, the rounded
+    // box of radius r - delta; by more, the inner box shrunk by delta - r, with sharp edges.
+    if (const auto* b = dynamic_cast<const RoundedBox*>(child.get())) {
+        const Vec3d size = b->size() - Vec3d(2.0 * delta);
+        if (!(std::min({size[0], size[1], size[2]}) > 0.0)) return nullptr;
+        if (delta < b->radius()) {
+            return std::make_shared<RoundedBox>(b->center(), size, b->radius() - delta);
+        }
+        return std::make_shared<Box>(b->center(), size);
+    }
     // A box is the intersection of its slabs, and shrinking an intersection shrinks each part:
     // the smaller box, whose edges stay sharp (the offset's own value, f - d, is not its
     // distance near them).
     if (const auto* b = dynamic_cast<const Box*>(child.get())) {
         const Vec3d size = b->size() - Vec3d(2.0 * delta);
-        if (!(delta > 0.0) || !(std::min({size[0], size[1], size[2]}) > 0.0)) return nullptr;
+        if (!(std::min({size[0], size[1], size[2]}) > 0.0)) return nullptr;
         return std::make_shared<Box>(b->center(), size);
     }
     // A rigid motion or uniform scale s moves the shrunk child, shrunk by delta / s in its own
@@ -50,13 +96,27 @@ Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
     // shrunk solid a cone's tip), none here.
     if (const auto* c = dynamic_cast<const CappedCone*>(child.get())) {
         const double length = c->length() - 2.0 * delta;
-        if (!(delta > 0.0) || !(length > 0.0)) return nullptr;
+        if (!(length > 0.0)) return nullptr;
         const double k = (c->radiusB() - c->radiusA()) / c->length();
         const double cut = delta * std::sqrt(1.0 + k * k);
         const double ra = c->radiusA() + k * delta - cut, rb = c->radiusB() - k * delta - cut;
         if (!(ra > 0.0) || !(rb > 0.0)) return nullptr;
         const Vec3d a = c->a() + c->axis() * delta;
         return std::make_shared<CappedCone>(a, a + c->axis() * length, ra, rb, c->typeName());
+    }
+    // Shrinking an intersection shrinks each part (a point is delta inside all of them exactly
+    // when it is delta inside each), and a difference A - B is A and the outside of B: A shrunk,
+    // B grown (dilatedShape()). A union is not the union of its parts shrunk (a point near where
+    // two parts meet is deep inside the union, not inside either): none.
+    if (const auto* c = dynamic_cast<const Csg*>(child.get()); c && c->op() != CsgOp::Union) {
+        std::vector<Implicit::Ptr> parts;
+        for (std::size_t k = 0; k < c->children().size(); ++k) {
+            const Implicit::Ptr& part = c->children()[k];
+            const bool shrunk = c->op() == CsgOp::Intersection || k == 0;
+            parts.push_back(shrunk ? erodedShape(part, delta) : dilatedShape(part, delta));
+            if (!parts.back()) return nullptr;
+        }
+        return std::make_shared<Csg>(c->op(), std::move(parts));
     }
     return nullptr;
 }

@@ -88,9 +88,16 @@ private:
 };
 
 /// @brief @a child shrunk by @a delta > 0 (its points at least delta inside) as a shape with
-/// exact foot points where one is known: a box's smaller box, a capped cylinder's or cone's
-/// shorter and thinner one, and such a shape's rigid motion or uniform scale the shrunk shape
-/// moved; null otherwise, or where nothing (or a cone's tip) is left.
+/// exact foot points where one is known: a sphere's smaller sphere, a box's smaller box, a
+/// rounded box's smaller rounded box (or, shrunk by more than its radius, its inner box shrunk),
+/// a capped cylinder's or cone's shorter and thinner one, an intersection's parts shrunk, a difference's first part shrunk and
+/// the others grown (dilatedShape()), and such a shape's rigid motion or uniform scale the shrunk
+/// shape moved; null otherwise, or where nothing (or a cone's tip) is left.
 Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta);
+
+/// @brief @a child grown by @a delta > 0 (the points within delta of it) as an exact SDF where
+/// one is known: a sphere's larger sphere, a box's rounded box, a union's parts grown, and such a
+/// shape's rigid motion or uniform scale; null otherwise.
+Implicit::Ptr dilatedShape(const Implicit::Ptr& child, double delta);
 
 } // namespace ivdb::implicit

@@ -122,6 +122,11 @@ public:
     bool isExactSdf() const override { return true; }
     std::string typeName() const override { return "rounded_box"; }
 
+    const Vec3d& center() const { return mCenter; }
+    /// The full outer edge lengths.
+    Vec3d size() const { return (mInner + Vec3d(mRadius)) * 2.0; }
+    double radius() const { return mRadius; }
+
 private:
     Vec3d mCenter, mInner; // mInner: half the size of the box before rounding
     double mRadius;
