@@ -631,6 +631,68 @@ TEST_F(TestTrueDistances, ShrunkRoundedBoxIsASmallerRoundedBoxOrABox)
     }
 }
 
+TEST_F(TestTrueDistances, GrownUnionIsTheUnionOfTheGrownParts)
+{
+    // The points within d of a union are those within d of one of its parts: an offset d > 0 of
+    // a union is the union of its parts grown (dilatedShape(): spheres larger, boxes rounded),
+    // whose creases the CSG's search finds. Two spheres grown, against the closed form of the
+    // union of the larger spheres; two boxes and a sphere grown, rotated, outside against the
+    // nearest grown part's closed form, inside at least as deep as every part. Before, the
+    // offset iterated on the union's field where the grown parts meet: the two spheres left
+    // 4,570 voxels to the lattice search, up to 0.26 voxel off.
+    const double dx = 0.01, d = 0.05, r = 0.4;
+    using implicit::Implicit;
+    const Vec3d a(-0.25, 0.0, 0.0), b(0.25, 0.0, 0.0);
+    const auto spheres = std::make_shared<implicit::Offset>(
+        std::make_shared<implicit::Csg>(implicit::CsgOp::Union, std::vector<Implicit::Ptr>{
+            std::make_shared<implicit::Sphere>(a, r), std::make_shared<implicit::Sphere>(b, r)}),
+        d);
+    const double worst = expectLocalDistances(spheres, [&](const Vec3d& p) {
+        return twoSphereDistance(implicit::CsgOp::Union, a, b, r + d, p);
+    }, dx, 1e-6, "two spheres grown");
+    EXPECT_LT(worst, 1e-6);
+
+    const Vec3d c1(0.0), s1(1.0, 0.3, 0.3), c2(0.2, 0.2, 0.1), s2(0.3, 0.6, 0.3), c3(-0.4, 0.1, 0.1);
+    const double r3 = 0.2;
+    const auto shape = std::make_shared<implicit::Transform>(
+        std::make_shared<implicit::Offset>(
+            std::make_shared<implicit::Csg>(implicit::CsgOp::Union, std::vector<Implicit::Ptr>{
+                std::make_shared<implicit::Box>(c1, s1), std::make_shared<implicit::Box>(c2, s2),
+                std::make_shared<implicit::Sphere>(c3, r3)}),
+            d),
+        Vec3d(0.02, -0.01, 0.03), Vec3d(10.0, 20.0, 30.0), Vec3d(1.0));
+    raster::RasterStats stats;
+    raster::RasterSettings s = settings(dx);
+    s.stats = &stats;
+    const auto g = raster::rasterize(shape, s);
+    EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u);
+    std::size_t outside = 0, inside = 0;
+    double worstOutside = 0.0, shallowest = 0.0;
+    for (auto it = g->cbeginValueOn(); it; ++it) {
+        const Vec3d q = shape->toLocal(Vec3d(it.getCoord().x(), it.getCoord().y(), it.getCoord().z()) * dx);
+        // The grown parts' exact distances: each part's distance less d.
+        const double parts[3] = {centredBoxDistance(q - c1, s1 * 0.5) - d,
+                                 centredBoxDistance(q - c2, s2 * 0.5) - d, (q - c3).length() - r3 - d};
+        const double nearest = std::min({parts[0], parts[1], parts[2]});
+        if (nearest > 0.0) {
+            ++outside;
+            worstOutside = std::max(worstOutside, std::abs(double(*it) - nearest) / dx);
+        } else {
+            // Inside: at least as deep as the deepest part (the union holds each part's
+            // neighbourhood of that depth).
+            ++inside;
+            shallowest = std::max(shallowest, (double(*it) - nearest) / dx);
+        }
+    }
+    std::printf("boxes and a sphere grown: %zu voxels outside, worst error %.2g voxel; %zu inside, "
+                "at most %.2g voxel shallower than the deepest part\n", outside, worstOutside,
+                inside, shallowest);
+    EXPECT_GT(outside, 10000u);
+    EXPECT_GT(inside, 10000u);
+    EXPECT_LT(worstOutside, 1e-4);
+    EXPECT_LT(shallowest, 1e-4);
+}
+
 TEST_F(TestTrueDistances, PlateWithAHoleIsTheDistanceToItsSurface)
 {
     // A plate minus a capped cylinder along z: through it (the crease is the two rims), and a

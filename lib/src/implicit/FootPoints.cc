@@ -879,7 +879,7 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
 {
     if (uniformScale() == 0.0 && mSurface) {
         // A non-uniform scale of a sphere, a quadric, a box, a capped cylinder or cone, a CSG
-        // node, or an offset or shell with a shrunk shape (Offset::eroded()): the same
+        // node, or an offset or shell with a shrunk shape (Offset::solid()): the same
         // surface's foot points (a world quadric's, a rigidly moved box's, the CSG's of a cone's
         // quadric and cap planes, the CSG's of its children scaled, the shrunk shape's), from
         // its own values. Of an exact SDF child, a point that surface leaves uncertified (a
@@ -1013,14 +1013,14 @@ void levelSetFeet(const Implicit& child, const double* x, const double* y, const
 void Offset::footPoints(const double* x, const double* y, const double* z, const double* values,
                         std::size_t n, const FootQuery& query, FootPoints& out) const
 {
-    if (mEroded) {
-        // The shrunk shape's own (an exact SDF: its distances and feet), with this node's
-        // surface and sign. Moving along the child's gradient reaches the shrunk surface near
-        // its sharp edges only by the smooth iteration, which answered voxels up to 0.77 voxel
-        // too far there.
+    if (mSolid) {
+        // The shrunk (or grown) shape's own foot points, with this node's surface and sign.
+        // Moving along the child's gradient reaches the shrunk surface near its sharp edges
+        // only by the smooth iteration, which answered voxels up to 0.77 voxel too far there;
+        // the grown surface of a union where the grown parts meet, likewise.
         double own[kMaxBatch];
-        mEroded->values(x, y, z, own, n);
-        mEroded->footPoints(x, y, z, own, n, query, out);
+        mSolid->values(x, y, z, own, n);
+        mSolid->footPoints(x, y, z, own, n, query, out);
         return;
     }
     if (!mChild->isExactSdf()) return Implicit::footPoints(x, y, z, values, n, query, out);

@@ -129,7 +129,8 @@ Offset::Offset(Ptr child, double distance): mChild(std::move(child)), mDistance(
         os << "offset distance must be finite, got " << distance;
         OPENVDB_THROW(openvdb::ValueError, os.str());
     }
-    if (distance < 0.0) mEroded = erodedShape(mChild, -distance);
+    if (distance < 0.0) mSolid = erodedShape(mChild, -distance);
+    if (distance > 0.0 && !mChild->isExactSdf()) mSolid = dilatedShape(mChild, distance);
 }
 
 double Offset::value(const Vec3d& p) const { return mChild->value(p) - mDistance; }

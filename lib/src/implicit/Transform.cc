@@ -115,11 +115,11 @@ void Transform::prepareSurface()
         m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
     }
     m[3][3] = 1.0;
-    if (const auto* o = dynamic_cast<const Offset*>(mChild.get()); o && o->eroded()) {
-        // A shrunk box, capped cylinder or cone is a smaller one (Offset::eroded()): the
+    if (const auto* o = dynamic_cast<const Offset*>(mChild.get()); o && o->solid()) {
+        // A shrunk box, capped cylinder or cone is a smaller one (Offset::solid()): the
         // offset's surface is that shape's, mapped by its route below (a box's scaled box, a
         // capped cone's quadric between its caps).
-        const std::shared_ptr<Transform> t(new Transform(o->eroded(), *this));
+        const std::shared_ptr<Transform> t(new Transform(o->solid(), *this));
         mSurface = t->mSurface;
         return;
     }

@@ -38,14 +38,16 @@ public:
 
     const Ptr& child() const { return mChild; }
     double distance() const { return mDistance; }
-    /// @brief The shrunk shape as an exact SDF where one is known (erodedShape(): a box's
-    /// smaller box, a capped cylinder's or cone's), else null: its foot points are this node's.
-    const Ptr& eroded() const { return mEroded; }
+    /// @brief The offset's solid as a shape of its own where one is known, else null: its foot
+    /// points are this node's. Shrunk (d < 0): erodedShape() (a box's smaller box, an
+    /// intersection's parts shrunk...). Grown (d > 0) from a child that is not an exact SDF (whose
+    /// gradient does not lead to the grown surface): dilatedShape() (a union's parts grown).
+    const Ptr& solid() const { return mSolid; }
 
 private:
     Ptr mChild;
     double mDistance;
-    Ptr mEroded;
+    Ptr mSolid;
 };
 
 /// @brief A hollow shell of a shape, of thickness t centred on its surface: |f| - t/2.
