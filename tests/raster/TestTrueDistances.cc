@@ -45,35 +45,47 @@ raster::RasterSettings settings(double dx, double halfWidth = 3.0)
     return s;
 }
 
-/// The signed distance to the surface of two spheres of radius @a r at @a a and @a b combined
-/// by @a op, in closed form: the nearest surface point is a radial projection onto one sphere
-/// (where that lies on the result's surface) or a point of the crease circle.
-double twoSphereDistance(implicit::CsgOp op, const Vec3d& a, const Vec3d& b, double r,
+/// The signed distance to the surface of two spheres of radii @a ra and @a rb at @a a and @a b
+/// combined by @a op, in closed form: the nearest surface point is a radial projection onto one
+/// sphere (where that lies on the result's surface) or a point of the crease circle.
+double twoSphereDistance(implicit::CsgOp op, const Vec3d& a, double ra, const Vec3d& b, double rb,
                          const Vec3d& p)
 {
-    const double da = (p - a).length() - r, db = (p - b).length() - r;
+    const double da = (p - a).length() - ra, db = (p - b).length() - rb;
     const double value = op == implicit::CsgOp::Union ? std::min(da, db)
                        : op == implicit::CsgOp::Intersection ? std::max(da, db)
                                                              : std::max(da, -db);
     // Is a point of one sphere on the result's surface? (Outside / inside the other sphere.)
     auto onSurfaceA = [&](const Vec3d& q) {
-        const double o = (q - b).length() - r;
+        const double o = (q - b).length() - rb;
         return op == implicit::CsgOp::Intersection ? o <= 0.0 : o >= 0.0;
     };
     auto onSurfaceB = [&](const Vec3d& q) {
-        const double o = (q - a).length() - r;
+        const double o = (q - a).length() - ra;
         return op == implicit::CsgOp::Union ? o >= 0.0 : o <= 0.0;
     };
     double best = std::numeric_limits<double>::max();
-    const Vec3d qa = a + (p - a).unitSafe() * r, qb = b + (p - b).unitSafe() * r;
+    const Vec3d qa = a + (p - a).unitSafe() * ra, qb = b + (p - b).unitSafe() * rb;
     if (onSurfaceA(qa)) best = std::min(best, std::abs(da));
     if (onSurfaceB(qb)) best = std::min(best, std::abs(db));
-    // The crease circle: centre midway, in the plane normal to b - a, radius from Pythagoras.
-    const Vec3d axis = (b - a).unitSafe(), m = (a + b) * 0.5;
-    const double rho = std::sqrt(r * r - 0.25 * (b - a).lengthSqr());
-    const double h = (p - m).dot(axis), w = ((p - m) - axis * h).length();
-    best = std::min(best, std::sqrt(h * h + (w - rho) * (w - rho)));
+    // The crease circle (if the spheres cut each other): in the plane normal to b - a at t from
+    // a, of radius rho, both from Pythagoras.
+    const double d = (b - a).length();
+    if (d < ra + rb && d > std::abs(ra - rb)) {
+        const Vec3d axis = (b - a) / d;
+        const double t = (d * d + ra * ra - rb * rb) / (2.0 * d), rho = std::sqrt(ra * ra - t * t);
+        const Vec3d m = a + axis * t;
+        const double h = (p - m).dot(axis), w = ((p - m) - axis * h).length();
+        best = std::min(best, std::sqrt(h * h + (w - rho) * (w - rho)));
+    }
     return value < 0.0 ? -best : best;
+}
+
+/// twoSphereDistance() of two spheres of the same radius @a r.
+double twoSphereDistance(implicit::CsgOp op, const Vec3d& a, const Vec3d& b, double r,
+                         const Vec3d& p)
+{
+    return twoSphereDistance(op, a, r, b, r, p);
 }
 
 /// The signed distance to the ellipsoid with semi-axes @a e (axis-aligned, at the origin), by
@@ -691,6 +703,39 @@ TEST_F(TestTrueDistances, GrownUnionIsTheUnionOfTheGrownParts)
     EXPECT_GT(inside, 10000u);
     EXPECT_LT(worstOutside, 1e-4);
     EXPECT_LT(shallowest, 1e-4);
+}
+
+TEST_F(TestTrueDistances, OffsetOfACsgIsTheCsgOfItsPartsOffset)
+{
+    // A CSG node's value is the min or max of its terms, so its offset's surface {f = d} is the
+    // CSG of its parts' {f_i = d} (a difference's cut at -d): spheres larger or smaller. Against
+    // the closed form of two spheres of other radii combined: a union shrunk, an intersection
+    // grown, a difference grown and shrunk. Before, the offset iterated on the CSG's field
+    // (voxels left to the lattice search), and an intersection or difference grown was refused
+    // as unbounded.
+    const double dx = 0.01, r = 0.4, d = 0.05;
+    using implicit::CsgOp;
+    const Vec3d a(-0.25, 0.0, 0.0), b(0.25, 0.0, 0.0);
+    for (const CsgOp op : {CsgOp::Union, CsgOp::Intersection, CsgOp::Difference}) {
+        for (const double offset : {-d, d}) {
+            if ((op == CsgOp::Union && offset > 0.0) || (op == CsgOp::Intersection && offset < 0.0)) {
+                continue; // GrownUnionIsTheUnionOfTheGrownParts; a shrunk intersection above
+            }
+            const auto shape = std::make_shared<implicit::Offset>(
+                std::make_shared<implicit::Csg>(op, std::vector<implicit::Implicit::Ptr>{
+                    std::make_shared<implicit::Sphere>(a, r), std::make_shared<implicit::Sphere>(b, r)}),
+                offset);
+            // The cut of a difference moves the other way: max(f_a, -f_b) = d where f_b = -d.
+            const double rb = op == CsgOp::Difference ? r - offset : r + offset;
+            const std::string what = std::string(op == CsgOp::Union ? "union" : op == CsgOp::Intersection
+                                                 ? "intersection" : "difference") +
+                                     (offset > 0.0 ? " grown" : " shrunk");
+            const double worst = expectLocalDistances(shape, [&](const Vec3d& p) {
+                return twoSphereDistance(op, a, r + offset, b, rb, p);
+            }, dx, 1e-6, what);
+            EXPECT_LT(worst, 1e-6) << what;
+        }
+    }
 }
 
 TEST_F(TestTrueDistances, PlateWithAHoleIsTheDistanceToItsSurface)

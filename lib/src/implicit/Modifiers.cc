@@ -28,6 +28,31 @@ BBoxd grown(const BBoxd& box, double d) { return BBoxd(box.min() - Vec3d(d), box
 
 // ---- Offset ---------------------------------------------------------------------------------
 
+namespace {
+
+/// The solid {f <= level} of a CSG node's value f as a CSG node itself: the node's value is the
+/// min or max of its terms, so its level set is the union or intersection of theirs (min(a, b)
+/// <= l where a <= l or b <= l; max(a, b) <= l where both are; max(a, -b) <= l where a <= l and
+/// b >= -l). A part's own {a <= l}: erodedShape() or dilatedShape() where known, else, of an
+/// exact SDF, its offset (whose foot points follow the part's gradient). Null if a part has
+/// none, or nothing is left of it.
+Implicit::Ptr csgLevelShape(const Csg& c, double level)
+{
+    std::vector<Implicit::Ptr> parts;
+    for (std::size_t k = 0; k < c.children().size(); ++k) {
+        const Implicit::Ptr& part = c.children()[k];
+        const double l = c.op() == CsgOp::Difference && k > 0 ? -level : level;
+        Implicit::Ptr shape = l < 0.0 ? erodedShape(part, -l) : dilatedShape(part, l);
+        if (!shape && part->isExactSdf() && l != 0.0) shape = std::make_shared<Offset>(part, l);
+        if (!shape && l == 0.0) shape = part;
+        if (!shape) return nullptr;
+        parts.push_back(std::move(shape));
+    }
+    return std::make_shared<Csg>(c.op(), std::move(parts));
+}
+
+} // namespace
+
 Implicit::Ptr dilatedShape(const Implicit::Ptr& child, double delta)
 {
     if (!(delta > 0.0)) return nullptr;
@@ -44,15 +69,7 @@ Implicit::Ptr dilatedShape(const Implicit::Ptr& child, double delta)
         const Implicit::Ptr outer = s > 0.0 ? dilatedShape(t->child(), delta / s) : nullptr;
         return outer ? t->moved(outer) : nullptr;
     }
-    // Growing a union grows each part.
-    if (const auto* c = dynamic_cast<const Csg*>(child.get()); c && c->op() == CsgOp::Union) {
-        std::vector<Implicit::Ptr> parts;
-        for (const auto& part : c->children()) {
-            parts.push_back(dilatedShape(part, delta));
-            if (!parts.back()) return nullptr;
-        }
-        return std::make_shared<Csg>(CsgOp::Union, std::move(parts));
-    }
+    if (const auto* c = dynamic_cast<const Csg*>(child.get())) return csgLevelShape(*c, delta);
     return nullptr;
 }
 
@@ -104,20 +121,7 @@ Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
         const Vec3d a = c->a() + c->axis() * delta;
         return std::make_shared<CappedCone>(a, a + c->axis() * length, ra, rb, c->typeName());
     }
-    // Shrinking an intersection shrinks each part (a point is delta inside all of them exactly
-    // when it is delta inside each), and a difference A - B is A and the outside of B: A shrunk,
-    // B grown (dilatedShape()). A union is not the union of its parts shrunk (a point near where
-    // two parts meet is deep inside the union, not inside either): none.
-    if (const auto* c = dynamic_cast<const Csg*>(child.get()); c && c->op() != CsgOp::Union) {
-        std::vector<Implicit::Ptr> parts;
-        for (std::size_t k = 0; k < c->children().size(); ++k) {
-            const Implicit::Ptr& part = c->children()[k];
-            const bool shrunk = c->op() == CsgOp::Intersection || k == 0;
-            parts.push_back(shrunk ? erodedShape(part, delta) : dilatedShape(part, delta));
-            if (!parts.back()) return nullptr;
-        }
-        return std::make_shared<Csg>(c->op(), std::move(parts));
-    }
+    if (const auto* c = dynamic_cast<const Csg*>(child.get())) return csgLevelShape(*c, -delta);
     return nullptr;
 }
 
@@ -159,8 +163,12 @@ BBoxd Offset::boundingBox() const
 {
     const BBoxd box = mChild->boundingBox();
     if (mDistance <= 0.0) return box; // shrunk: inside the child
-    if (!mChild->isExactOutside() || !isFinite(box)) return infiniteBox();
-    return grown(box, mDistance);
+    if (mChild->isExactOutside() && isFinite(box)) return grown(box, mDistance);
+    // Grown from a child whose value is not the distance outside (an intersection or a
+    // difference) but with a solid of its own (the parts grown, a difference's cut shrunk):
+    // that solid's box, within its first part's grown.
+    if (mSolid) return mSolid->boundingBox();
+    return infiniteBox();
 }
 
 bool Offset::isExactOutside() const { return mDistance >= 0.0 && mChild->isExactOutside(); }

@@ -27,8 +27,8 @@ public:
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
-    /// The child's box, grown by d > 0 when the child is exact outside; unbounded for a grown
-    /// child that is not.
+    /// The child's box, grown by d > 0 when the child is exact outside; the solid's (solid())
+    /// for a grown child that is not; else unbounded.
     BBoxd boundingBox() const override;
     bool isExactSdf() const override { return false; }
     /// Grown (d >= 0) from a shape exact outside: f - d is the distance outside.
@@ -38,10 +38,11 @@ public:
 
     const Ptr& child() const { return mChild; }
     double distance() const { return mDistance; }
-    /// @brief The offset's solid as a shape of its own where one is known, else null: its foot
-    /// points are this node's. Shrunk (d < 0): erodedShape() (a box's smaller box, an
-    /// intersection's parts shrunk...). Grown (d > 0) from a child that is not an exact SDF (whose
-    /// gradient does not lead to the grown surface): dilatedShape() (a union's parts grown).
+    /// @brief The offset's solid {child <= d} as a shape of its own where one is known, else
+    /// null: its foot points are this node's. Shrunk (d < 0): erodedShape() (a box's smaller
+    /// box, a CSG node's parts shrunk...). Grown (d > 0) from a child that is not an exact SDF
+    /// (whose gradient does not lead to the grown surface): dilatedShape() (a CSG node's parts
+    /// grown...).
     const Ptr& solid() const { return mSolid; }
 
 private:
@@ -89,17 +90,21 @@ private:
     Ptr mEroded;
 };
 
-/// @brief @a child shrunk by @a delta > 0 (its points at least delta inside) as a shape with
-/// exact foot points where one is known: a sphere's smaller sphere, a box's smaller box, a
-/// rounded box's smaller rounded box (or, shrunk by more than its radius, its inner box shrunk),
-/// a capped cylinder's or cone's shorter and thinner one, an intersection's parts shrunk, a difference's first part shrunk and
-/// the others grown (dilatedShape()), and such a shape's rigid motion or uniform scale the shrunk
-/// shape moved; null otherwise, or where nothing (or a cone's tip) is left.
+/// @brief The solid {child <= -delta}, @a delta > 0 (of an exact SDF, its points at least
+/// delta inside), as a shape with exact foot points where one is known: a sphere's smaller
+/// sphere, a box's smaller box, a rounded box's smaller rounded box (or, shrunk by more than its
+/// radius, its inner box shrunk), a capped cylinder's or cone's shorter and thinner one, a CSG
+/// node's parts at that level (its value is their min or max: a union's or intersection's parts
+/// shrunk, a difference's first part shrunk and the others grown, dilatedShape()), and such a
+/// shape's rigid motion or uniform scale the shrunk shape moved; null otherwise, or where
+/// nothing (or a cone's tip) is left.
 Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta);
 
-/// @brief @a child grown by @a delta > 0 (the points within delta of it) as an exact SDF where
-/// one is known: a sphere's larger sphere, a box's rounded box, a union's parts grown, and such a
-/// shape's rigid motion or uniform scale; null otherwise.
+/// @brief The solid {child <= delta}, @a delta > 0 (of an exact SDF, the points within delta of
+/// it), as a shape with exact foot points where one is known: a sphere's larger sphere, a box's
+/// rounded box, a CSG node's parts at that level (a union's or intersection's parts grown, a
+/// difference's first part grown and the others shrunk), and such a shape's rigid motion or
+/// uniform scale; null otherwise.
 Implicit::Ptr dilatedShape(const Implicit::Ptr& child, double delta);
 
 } // namespace ivdb::implicit
