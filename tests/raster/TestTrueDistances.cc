@@ -738,6 +738,77 @@ TEST_F(TestTrueDistances, OffsetOfACsgIsTheCsgOfItsPartsOffset)
     }
 }
 
+/// The point of the capped cone (@a a, @a b, radii @a ra, @a rb) nearest @a p (p itself inside):
+/// in the half-plane through the axis the solid is a trapezoid, (0, 0), (ra, 0), (rb, L),
+/// (0, L) in (distance from the axis, distance along it), and p's nearest point is its own or
+/// the nearest of the trapezoid's edges off the axis.
+Vec3d nearestOfCappedCone(const Vec3d& a, const Vec3d& b, double ra, double rb, const Vec3d& p)
+{
+    const double len = (b - a).length();
+    const Vec3d u = (b - a) / len;
+    const double t = (p - a).dot(u);
+    Vec3d w = (p - a) - u * t;
+    const double rho = w.length();
+    w = rho > 0.0 ? w / rho : u.cross(std::abs(u[0]) < 0.9 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0)).unitSafe();
+    if (t >= 0.0 && t <= len && rho <= ra + (rb - ra) * t / len) return p;
+    const double ends[3][4] = {{0.0, 0.0, ra, 0.0}, {ra, 0.0, rb, len}, {rb, len, 0.0, len}};
+    double best = std::numeric_limits<double>::max(), bx = 0.0, by = 0.0;
+    for (const auto& e : ends) {
+        const double dx = e[2] - e[0], dy = e[3] - e[1];
+        const double h = std::clamp(((rho - e[0]) * dx + (t - e[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
+        const double cx = e[0] + h * dx, cy = e[1] + h * dy;
+        const double d2 = (rho - cx) * (rho - cx) + (t - cy) * (t - cy);
+        if (d2 < best) best = d2, bx = cx, by = cy;
+    }
+    return a + u * by + w * bx;
+}
+
+TEST_F(TestTrueDistances, CsgOfCappedConesAndBoxesIsTheDistanceToItsSurface)
+{
+    // A capped cylinder or cone is cut, like a box, into the pieces of its surface (its side's
+    // cone and its caps' planes), whose creases kink at its rims. A capped cylinder and a capped
+    // cone, each intersected with a rotated box, against the distance to the intersection of
+    // two convex solids: inside, the nearer of the two surfaces; outside, the distance to p's
+    // projection onto the intersection, by Dykstra's alternating projections onto the two solids
+    // (nothing of the library's pieces or creases). Before, 75 and 232 voxels went to the
+    // lattice search, up to 0.35 and 0.62 voxel off.
+    const double dx = 0.01;
+    const Vec3d a(-0.1, 0.05, -0.4), b(0.1, -0.05, 0.4), half(0.3, 0.3, 0.3);
+    const implicit::Transform box(std::make_shared<implicit::Box>(Vec3d(0.0), half * 2.0), Vec3d(0.0),
+                                  Vec3d(10.0, 20.0, 30.0), Vec3d(1.0));
+    for (const double rb : {0.35, 0.15}) {
+        const double ra = rb == 0.35 ? 0.35 : 0.4;
+        const auto shape = std::make_shared<implicit::Csg>(implicit::CsgOp::Intersection,
+            std::vector<implicit::Implicit::Ptr>{
+                std::make_shared<implicit::CappedCone>(a, b, ra, rb, rb == ra ? "capped_cylinder" : "capped_cone"),
+                box.moved(box.child())});
+        auto ontoBox = [&](const Vec3d& p) {
+            const Vec3d q = box.toLocal(p);
+            return box.toWorld(Vec3d(std::clamp(q[0], -half[0], half[0]), std::clamp(q[1], -half[1], half[1]),
+                                     std::clamp(q[2], -half[2], half[2])));
+        };
+        const auto reference = [&](const Vec3d& p) {
+            const double value = shape->value(p);
+            if (value >= 4.0 * dx) return value; // a lower bound outside: beyond the band
+            if (value <= 0.0) return value;      // inside an intersection: the nearer surface
+            Vec3d x = p, inA(0.0), inB(0.0);
+            for (int it = 0; it < 200000; ++it) {
+                const Vec3d y = nearestOfCappedCone(a, b, ra, rb, x + inA);
+                inA = x + inA - y;
+                const Vec3d next = ontoBox(y + inB);
+                inB = y + inB - next;
+                const bool settled = (next - x).length() < 1e-13 && (next - y).length() < 1e-13;
+                x = next;
+                if (settled) break;
+            }
+            return (p - x).length();
+        };
+        const std::string what = ra == rb ? "capped cylinder and a box" : "capped cone and a box";
+        const double worst = expectLocalDistances(shape, reference, dx, 1e-4, what);
+        EXPECT_LT(worst, 1e-4) << what;
+    }
+}
+
 TEST_F(TestTrueDistances, PlateWithAHoleIsTheDistanceToItsSurface)
 {
     // A plate minus a capped cylinder along z: through it (the crease is the two rims), and a

@@ -32,6 +32,8 @@ namespace {
 /// after different numbers of rounds differ by far less than a voxel's second differences can
 /// see (curvature stays smooth).
 constexpr int kMaxRounds = 12;
+/// The crease iteration's rounds between two pieces of planes and cone sides (creasePoint()).
+constexpr int kMaxPieceRounds = 48;
 constexpr double kConverged = 1e-4;
 
 /// Whether a smooth-field round's point q has converged (kConverged, as @a converged world
@@ -274,33 +276,87 @@ bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, doub
 namespace {
 
 /// A smooth piece of a CSG term's surface, as the crease and corner searches see it: the whole
-/// term (@a f, a smooth surface), or a plane n . q = offset (@a f null, @a n a unit normal) that
-/// holds a face of a polyhedral term (polyhedralPlanes()).
+/// term (a smooth surface), a plane n . q = offset (unit n) that holds a face of a box, or the
+/// infinite cone (a cylinder at slope 0) that holds a capped cone's side (pieceParts()).
 struct Piece
 {
-    const Implicit* f = nullptr;
-    Vec3d n;
-    double offset = 0.0;
+    enum class Kind { Whole, Plane, Side };
+    Kind kind = Kind::Whole;
+    const Implicit* f = nullptr; // Whole
+    Vec3d n;                     // Plane: the unit normal; Side: the unit axis
+    double offset = 0.0;         // Plane
+    Vec3d a;                     // Side: a point of the axis, where the radius is r
+    double r = 0.0, slope = 0.0, cosine = 1.0; // Side: radius r + slope s at s along the axis
+    /// The value is a convex function: a plane's, a side's (the distance from the axis is), a
+    /// convex solid's exact SDF.
+    bool convex = false;
 
-    double value(const Vec3d& q) const { return f ? f->value(q) : dot(n, q) - offset; }
-    Vec3d gradient(const Vec3d& q) const { return f ? f->gradient(q) : n; }
+    /// Of a side, the signed distance to its line in the half-plane through the axis (the
+    /// distance to the cone near it, away from the apex).
+    double value(const Vec3d& q) const
+    {
+        if (kind == Kind::Whole) return f->value(q);
+        if (kind == Kind::Plane) return dot(n, q) - offset;
+        const Vec3d w = q - a;
+        const double s = dot(w, n);
+        return ((w - n * s).length() - r - slope * s) * cosine;
+    }
+    Vec3d gradient(const Vec3d& q) const
+    {
+        if (kind == Kind::Whole) return f->gradient(q);
+        if (kind == Kind::Plane) return n;
+        const Vec3d w = q - a, radial = w - n * dot(w, n);
+        const double len = radial.length();
+        if (!(len > 0.0)) return Vec3d(0.0); // on the axis: no normal
+        return (radial / len - n * slope) * cosine;
+    }
+    /// Moved by @a t (a rigid motion with a uniform scale).
+    void move(const Transform& t, double s)
+    {
+        const Vec3d origin = t.toWorld(Vec3d(0.0));
+        Vec3d rn = (t.toWorld(n) - origin) / s;
+        rn /= rn.length();
+        if (kind == Kind::Plane) {
+            // n . q = o with q = R^T (w - t) / s: (R n) . w = s o + (R n) . t.
+            offset = s * offset + dot(rn, origin);
+        } else {
+            a = t.toWorld(a);
+            r *= s;
+        }
+        n = rn;
+    }
 };
 
-/// A polyhedral CSG term with more planes than this (eight boxes) is searched as one piece.
-constexpr std::size_t kMaxTermPlanes = 48;
+/// @a f is the exact SDF of a convex solid (a sphere, box, rounded box, capped cylinder or cone,
+/// moved rigidly or scaled uniformly): its value is a convex function.
+bool convexSdf(const Implicit& f)
+{
+    if (dynamic_cast<const Sphere*>(&f) || dynamic_cast<const Box*>(&f) ||
+        dynamic_cast<const RoundedBox*>(&f) || dynamic_cast<const CappedCone*>(&f)) {
+        return true;
+    }
+    const auto* t = dynamic_cast<const Transform*>(&f);
+    return t && t->uniformScale() > 0.0 && convexSdf(*t->child());
+}
 
-/// The planes that hold every face of @a f, if @a f is polyhedral: a box (its six faces), a
-/// CSG node of polyhedral children, or one of those moved rigidly or scaled uniformly. Appends
-/// them to @a out and returns true; false (nothing appended) for any other shape. Where such a
-/// term meets another, the crease is a chain of pieces that kinks at the term's own edges, and
-/// the nearest point of it is often a kink: searched plane by plane (and edge by edge), every
-/// piece in closed form.
-bool polyhedralPlanes(const Implicit& f, std::vector<Piece>& out)
+/// A CSG term with more pieces than this (eight boxes) is searched whole.
+constexpr std::size_t kMaxTermPieces = 48;
+
+/// The smooth pieces that hold every part of @a f's surface, if @a f is made of planes and cone
+/// sides: a box (its six faces' planes), a capped cylinder or cone (its side's cone and its caps'
+/// planes), a CSG node of such children, or one of those moved rigidly or scaled uniformly.
+/// Appends them to @a out and returns true; false (nothing appended) for any other shape. Where
+/// such a term meets another, the crease is a chain of pieces that kinks at the term's own edges
+/// (a box's edges, a cone's rims), and the nearest point of it is often a kink: searched piece by
+/// piece.
+bool pieceParts(const Implicit& f, std::vector<Piece>& out)
 {
     if (const auto* box = dynamic_cast<const Box*>(&f)) {
         const Vec3d c = box->center(), h = box->size() * 0.5;
         for (int k = 0; k < 3; ++k) {
             Piece plus, minus;
+            plus.kind = minus.kind = Piece::Kind::Plane;
+            plus.convex = minus.convex = true;
             plus.n = minus.n = Vec3d(0.0);
             plus.n[k] = 1.0;
             plus.offset = c[k] + h[k];
@@ -311,22 +367,37 @@ bool polyhedralPlanes(const Implicit& f, std::vector<Piece>& out)
         }
         return true;
     }
+    if (const auto* cone = dynamic_cast<const CappedCone*>(&f)) {
+        const Vec3d u = cone->axis();
+        Piece side, capA, capB;
+        side.kind = Piece::Kind::Side;
+        side.convex = true;
+        side.n = u;
+        side.a = cone->a();
+        side.r = cone->radiusA();
+        side.slope = (cone->radiusB() - cone->radiusA()) / cone->length();
+        side.cosine = 1.0 / std::sqrt(1.0 + side.slope * side.slope);
+        capA.kind = capB.kind = Piece::Kind::Plane;
+        capA.convex = capB.convex = true;
+        capA.n = -u;
+        capA.offset = -dot(u, cone->a());
+        capB.n = u;
+        capB.offset = dot(u, cone->a()) + cone->length();
+        out.push_back(side);
+        out.push_back(capA);
+        out.push_back(capB);
+        return true;
+    }
     const std::size_t before = out.size();
     if (const auto* t = dynamic_cast<const Transform*>(&f)) {
         const double s = t->uniformScale();
-        if (!(s > 0.0) || !polyhedralPlanes(*t->child(), out)) return false;
-        // n . q = o with q = R^T (w - t) / s: (R n) . w = s o + (R n) . t.
-        const Vec3d origin = t->toWorld(Vec3d(0.0));
-        for (std::size_t k = before; k < out.size(); ++k) {
-            const Vec3d rn = (t->toWorld(out[k].n) - origin) / s;
-            out[k].n = rn / rn.length();
-            out[k].offset = s * out[k].offset + dot(out[k].n, origin);
-        }
+        if (!(s > 0.0) || !pieceParts(*t->child(), out)) return false;
+        for (std::size_t k = before; k < out.size(); ++k) out[k].move(*t, s);
         return true;
     }
     if (const auto* csg = dynamic_cast<const Csg*>(&f)) {
         for (const auto& child : csg->children()) {
-            if (!polyhedralPlanes(*child, out)) {
+            if (!pieceParts(*child, out)) {
                 out.resize(before);
                 return false;
             }
@@ -341,12 +412,34 @@ bool polyhedralPlanes(const Implicit& f, std::vector<Piece>& out)
 /// and a move along the crease's tangent to the foot of the perpendicular from p, until
 /// converged (kConverged). Certified when q is on both surfaces and p - q is perpendicular to
 /// the crease, within @a tol.
+/// Where @a a is a plane, @a start on it, and @a b convex (Piece::convex), every round's point x
+/// on the plane bounds the crease from p, whether it is found or not: b >= b(x) + g.(q - x) on
+/// the plane (g the part of b's gradient along it), so a crease point q lies where g.(q - x)
+/// <= -b(x), at least (g.(q0 - x) + b(x)) / |g| from q0, p's foot on the plane. The largest such
+/// bound, with p's height above the plane, goes to @a floor (0 if none): a plane that passes
+/// near a cone's side without cutting it there has no crease for the rounds to converge to.
 bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double tol,
-                 Vec3d& out)
+                 Vec3d& out, double& floor)
 {
-    for (int round = 0; round < kMaxRounds; ++round) {
+    floor = 0.0;
+    const bool bounded = a.kind == Piece::Kind::Plane && b.convex;
+    const double height = bounded ? a.value(p) : 0.0;
+    const Vec3d q0 = p - a.n * height;
+    double away = 0.0; // the largest bound on |q - q0| so far
+    // Planes and cone sides cost little a round: where they meet at a shallow angle (the
+    // tangential error shrinks by a constant factor a round) they get more rounds.
+    const int rounds = a.kind != Piece::Kind::Whole && b.kind != Piece::Kind::Whole
+                     ? kMaxPieceRounds : kMaxRounds;
+    for (int round = 0; round < rounds; ++round) {
         const double fa = a.value(q), fb = b.value(q);
         const Vec3d ga = a.gradient(q), gb = b.gradient(q);
+        if (bounded && fb > 0.0 && gb.lengthSqr() > 0.0) {
+            const Vec3d g = gb - a.n * dot(a.n, gb);
+            const double len = g.length();
+            away = std::max(away, len > 0.0 ? (dot(g, q0 - q) + fb) / len
+                                            : std::numeric_limits<double>::infinity());
+            floor = std::sqrt(height * height + away * away);
+        }
         const double aa = dot(ga, ga), ab = dot(ga, gb), bb = dot(gb, gb);
         const double det = aa * bb - ab * ab; // |ga x gb|^2
         if (!(det > 1e-12 * aa * bb) || !std::isfinite(det)) return false; // tangent surfaces
@@ -357,7 +450,7 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
         out = q;
         const double c = kConverged * tol;
         if (offA <= c && offB <= c && along <= c) return true;
-        if (round + 1 == kMaxRounds) return offA <= tol && offB <= tol && along <= tol;
+        if (round + 1 == rounds) return offA <= tol && offB <= tol && along <= tol;
         const double la = (fa * bb - fb * ab) / det, lb = (fb * aa - fa * ab) / det;
         q -= ga * la + gb * lb;
         q += t * dot(p - q, t);
@@ -392,12 +485,15 @@ Crease sphereCrease(const Sphere& a, const Sphere& b, const Vec3d& p, Vec3d& out
 
 /// The nearest point of the crease of @a a and @a b to @a p: in closed form for two spheres
 /// (@a sa and @a sb, null for other shapes) and for two planes (their line, none if they are
-/// parallel), else by creasePoint() from @a start.
+/// parallel), else by creasePoint() from @a start (from p's foot on a plane, if one is), which
+/// also bounds how near p a crease it did not find can be (@a floor, else 0).
 Crease nearestCreasePoint(const Piece& a, const Piece& b, const Sphere* sa, const Sphere* sb,
-                          const Vec3d& p, const Vec3d& start, double tol, Vec3d& out)
+                          const Vec3d& p, const Vec3d& start, double tol, Vec3d& out,
+                          double& floor)
 {
+    floor = 0.0;
     if (sa && sb) return sphereCrease(*sa, *sb, p, out);
-    if (!a.f && !b.f) {
+    if (a.kind == Piece::Kind::Plane && b.kind == Piece::Kind::Plane) {
         // The least move from p onto both planes: p - la n_a - lb n_b, with [1 c; c 1] [la lb]
         // = [f_a f_b] (c = n_a . n_b), lands on the foot of the perpendicular from p.
         const double c = dot(a.n, b.n), det = 1.0 - c * c;
@@ -406,7 +502,12 @@ Crease nearestCreasePoint(const Piece& a, const Piece& b, const Sphere* sa, cons
         out = p - a.n * ((fa - fb * c) / det) - b.n * ((fb - fa * c) / det);
         return Crease::Found;
     }
-    return creasePoint(a, b, p, start, tol, out) ? Crease::Found : Crease::Failed;
+    // A plane first: it bounds the crease where the iteration fails (creasePoint()).
+    if (b.kind == Piece::Kind::Plane && a.kind != Piece::Kind::Plane) {
+        return creasePoint(b, a, p, p - b.n * b.value(p), tol, out, floor) ? Crease::Found
+                                                                        : Crease::Failed;
+    }
+    return creasePoint(a, b, p, start, tol, out, floor) ? Crease::Found : Crease::Failed;
 }
 
 } // namespace
@@ -487,16 +588,21 @@ public:
              const double* y, const double* z, std::size_t n, const FootQuery& query)
         : mChildren(children), mOp(op), mX(x), mY(y), mZ(z), mQuery(query),
           mN(n), mValues(new double[children.size() * n]), mFeet(children.size()),
-          mWhole(children.size()), mPlanes(children.size())
+          mWhole(children.size()), mParts(children.size())
     {
         for (std::size_t c = 0; c < children.size(); ++c) {
             mSphere.push_back(dynamic_cast<const Sphere*>(children[c].get()));
             mWhole[c].f = children[c].get();
-            // Planes are searched one by one: a term of many (a union of many boxes) is
+            mWhole[c].convex = convexSdf(*children[c]);
+            // Pieces are searched one by one: a term of many (a union of many boxes) is
             // searched whole instead, its crease by the iteration.
-            if (!mSphere[c] && polyhedralPlanes(*children[c], mPlanes[c]) &&
-                mPlanes[c].size() > kMaxTermPlanes) {
-                mPlanes[c].clear();
+            if (!mSphere[c] && pieceParts(*children[c], mParts[c]) &&
+                mParts[c].size() > kMaxTermPieces) {
+                mParts[c].clear();
+            }
+            mPolyhedron.push_back(!mParts[c].empty());
+            for (const Piece& piece : mParts[c]) {
+                if (piece.kind != Piece::Kind::Plane) mPolyhedron.back() = false;
             }
             children[c]->values(x, y, z, value(c), n);
             if (children[c]->isExactSdf()) continue;
@@ -554,10 +660,10 @@ public:
     /// Inside the union at point @a i (deepest term value @a u), near a crease: the nearest point
     /// of the union's surface is a term's foot point, a point of the crease of two terms or a
     /// corner of three, that lies outside every other term. Only terms whose surface is within
-    /// reach can offer one. A polyhedral term's surface is cut into its faces' planes: the foot
-    /// of the perpendicular on each, the crease of each two pieces (the term's own edges among
-    /// them) and the corner of each three, where such a point lies on the term's surface. Writes
-    /// the distance (at most far) and that point; returns whether certified.
+    /// reach can offer one. A term made of planes and cone sides (pieceParts()) is cut into
+    /// them: the foot of the perpendicular on each, the crease of each two pieces (the term's own
+    /// edges among them) and the corner of each three, where such a point lies on the term's
+    /// surface. Writes the distance (at most far) and that point; returns whether certified.
     bool nearestInside(std::size_t i, double u, double& depth, Vec3d& nearest);
 
 private:
@@ -611,7 +717,8 @@ private:
     std::vector<std::unique_ptr<FootPoints>> mFeet;
     std::vector<const Sphere*> mSphere; // the children that are spheres (closed forms), else null
     std::vector<Piece> mWhole;                // each child as one piece
-    std::vector<std::vector<Piece>> mPlanes;  // a polyhedral child's planes, else empty
+    std::vector<std::vector<Piece>> mParts;   // a child's pieces (pieceParts()), else empty
+    std::vector<bool> mPolyhedron;            // its pieces are all planes
     std::vector<std::size_t> mNear; // reused across points
     std::vector<Vec3d> mNearFeet;   // their foot points (where found), as mNear
     /// A piece within reach of the point: of term @a term, no point of it on the term's surface
@@ -677,7 +784,7 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     bool spheres = true, polyhedra = true;
     for (std::size_t c : mNear) {
         spheres = spheres && mSphere[c] != nullptr;
-        polyhedra = polyhedra && !mPlanes[c].empty();
+        polyhedra = polyhedra && mPolyhedron[c];
     }
     const bool closedForms = spheres || polyhedra;
     auto offer = [&](const Vec3d& q) {
@@ -691,48 +798,55 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
         if (!foot(c, i, q)) complete = false;
         else if (outsideOthers(p, q, {c})) offer(q);
     }
-    // The pieces within reach, nearest first: a smooth term whole, a polyhedral term's planes
-    // (a point of the term's surface on one is at least as far as the plane and as that surface;
-    // the foot of the perpendicular on a plane is a candidate where it lies within a face).
+    // The pieces within reach, nearest first: a smooth term whole, another term's planes and
+    // cone sides (a point of the term's surface on one is at least as far as the plane, or as
+    // the side's line in the half-plane through the axis, and as that surface; the foot of the
+    // perpendicular on a piece is a candidate where it lies on the term's surface).
     mPieces.clear();
     for (std::size_t a = 0; a < mNear.size(); ++a) {
         const std::size_t c = mNear[a];
         const double dc = std::abs(distance(c, i));
-        if (mPlanes[c].empty()) {
+        if (mParts[c].empty()) {
             mPieces.push_back({&mWhole[c], c, dc, mNearFeet[a]});
             continue;
         }
-        for (const Piece& plane : mPlanes[c]) {
-            const double f = plane.value(p), bound = std::max(dc, std::abs(f));
+        for (const Piece& piece : mParts[c]) {
+            const double f = piece.value(p), bound = std::max(dc, std::abs(f));
             if (bound >= std::min(best, mQuery.far)) continue;
-            const Vec3d q = p - plane.n * f;
-            mPieces.push_back({&plane, c, bound, q});
+            const Vec3d q = p - piece.gradient(p) * f;
+            mPieces.push_back({&piece, c, bound, q});
             if (onTerm(c, q) && outsideOthers(p, q, {c})) offer(q);
         }
     }
     std::stable_sort(mPieces.begin(), mPieces.end(),
                      [](const NearPiece& l, const NearPiece& r) { return l.bound < r.bound; });
     // A point found on a piece lies on its term's surface: a whole term's by construction, a
-    // plane's where the term's value there is zero (within a face or on its edges).
+    // plane's or side's where the term's value there is zero (within a face or on its edges).
     auto onPieces = [&](std::initializer_list<const NearPiece*> pieces, const Vec3d& q) {
         for (const NearPiece* e : pieces) {
-            if (!e->piece->f && !onTerm(e->term, q)) return false;
+            if (e->piece->kind != Piece::Kind::Whole && !onTerm(e->term, q)) return false;
         }
         return true;
     };
-    auto sphereOf = [&](const NearPiece& e) { return e.piece->f ? mSphere[e.term] : nullptr; };
+    auto sphereOf = [&](const NearPiece& e) {
+        return e.piece->kind == Piece::Kind::Whole ? mSphere[e.term] : nullptr;
+    };
     auto beyond = [&](const NearPiece& e) { return e.bound >= best; };
+    double failedFloor = std::numeric_limits<double>::infinity(); // of the creases not found
     for (std::size_t a = 0; a < mPieces.size() && !beyond(mPieces[a]); ++a) {
         const NearPiece& pa = mPieces[a];
         for (std::size_t b = a + 1; b < mPieces.size() && !beyond(mPieces[b]); ++b) {
             const NearPiece& pb = mPieces[b];
             Vec3d q;
+            double floor;
             const Crease crease = nearestCreasePoint(*pa.piece, *pb.piece, sphereOf(pa),
                                                      sphereOf(pb), p, pa.start,
-                                                     mQuery.tolerance, q);
+                                                     mQuery.tolerance, q, floor);
             if (crease == Crease::None) continue; // the two surfaces do not meet
             if (crease == Crease::Failed) {
-                complete = false;
+                // Not found: missing, unless no crease point can be nearer than the best (the
+                // final one, below).
+                failedFloor = std::min(failedFloor, floor);
                 continue;
             }
             if (onPieces({&pa, &pb}, q) && outsideOthers(p, q, {pa.term, pb.term})) offer(q);
@@ -755,6 +869,7 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
             }
         }
     }
+    if (failedFloor < std::min(best, mQuery.far)) complete = false;
     depth = std::min(best, mQuery.far);
     // Certified if every candidate was found, or the best reaches the lower bound |u| of the
     // distance (inside the union the distance is at least the deepest term's depth). With none
