@@ -763,6 +763,25 @@ Vec3d nearestOfCappedCone(const Vec3d& a, const Vec3d& b, double ra, double rb, 
     return a + u * by + w * bx;
 }
 
+/// The distance from @a p to the intersection of two convex solids, given the nearest point of
+/// each (@a ontoA, @a ontoB: the point itself inside): p's projection onto the intersection by
+/// Dykstra's alternating projections, until they settle.
+double intersectionDistance(const std::function<Vec3d(const Vec3d&)>& ontoA,
+                            const std::function<Vec3d(const Vec3d&)>& ontoB, const Vec3d& p)
+{
+    Vec3d x = p, inA(0.0), inB(0.0);
+    for (int it = 0; it < 200000; ++it) {
+        const Vec3d y = ontoA(x + inA);
+        inA = x + inA - y;
+        const Vec3d next = ontoB(y + inB);
+        inB = y + inB - next;
+        const bool settled = (next - x).length() < 1e-13 && (next - y).length() < 1e-13;
+        x = next;
+        if (settled) break;
+    }
+    return (p - x).length();
+}
+
 TEST_F(TestTrueDistances, CsgOfCappedConesAndBoxesIsTheDistanceToItsSurface)
 {
     // A capped cylinder or cone is cut, like a box, into the pieces of its surface (its side's
@@ -791,22 +810,53 @@ TEST_F(TestTrueDistances, CsgOfCappedConesAndBoxesIsTheDistanceToItsSurface)
             const double value = shape->value(p);
             if (value >= 4.0 * dx) return value; // a lower bound outside: beyond the band
             if (value <= 0.0) return value;      // inside an intersection: the nearer surface
-            Vec3d x = p, inA(0.0), inB(0.0);
-            for (int it = 0; it < 200000; ++it) {
-                const Vec3d y = nearestOfCappedCone(a, b, ra, rb, x + inA);
-                inA = x + inA - y;
-                const Vec3d next = ontoBox(y + inB);
-                inB = y + inB - next;
-                const bool settled = (next - x).length() < 1e-13 && (next - y).length() < 1e-13;
-                x = next;
-                if (settled) break;
-            }
-            return (p - x).length();
+            return intersectionDistance(
+                [&](const Vec3d& q) { return nearestOfCappedCone(a, b, ra, rb, q); }, ontoBox, p);
         };
         const std::string what = ra == rb ? "capped cylinder and a box" : "capped cone and a box";
         const double worst = expectLocalDistances(shape, reference, dx, 1e-4, what);
         EXPECT_LT(worst, 1e-4) << what;
     }
+}
+
+TEST_F(TestTrueDistances, RoundedBoxAndSphereIntersectedIsTheDistanceToItsSurface)
+{
+    // Two convex solids whose surfaces meet at a shallow angle: where the crease iteration does
+    // not converge, each round's point bounds how near a crease can be (both values are convex:
+    // each lies above its tangent plane), and a crease that cannot beat the best candidate is
+    // not missing. A rotated rounded box and a sphere intersected, against Dykstra's
+    // projections. Before, 19 voxels went to the lattice search, up to 0.21 voxel off.
+    const double dx = 0.01, r = 0.03;
+    const Vec3d centre(-0.13, -0.02, 0.16), size(0.9, 0.67, 0.56), ball(0.3, -0.07, 0.25);
+    const double radius = 0.43;
+    using implicit::Transform;
+    const auto rounded = std::make_shared<Transform>(
+        std::make_shared<implicit::RoundedBox>(centre, size, r), Vec3d(0.0), Vec3d(-25.0, -51.0, 1.0),
+        Vec3d(1.0));
+    const auto sphere = std::make_shared<Transform>(std::make_shared<implicit::Sphere>(ball, radius),
+                                                    Vec3d(0.0), Vec3d(-49.0, 30.0, -29.0), Vec3d(1.0));
+    const auto shape = std::make_shared<implicit::Csg>(implicit::CsgOp::Intersection,
+                                                       std::vector<implicit::Implicit::Ptr>{rounded, sphere});
+    const Vec3d inner = size * 0.5 - Vec3d(r);
+    auto ontoRounded = [&](const Vec3d& p) {
+        const Vec3d q = rounded->toLocal(p) - centre;
+        const Vec3d c(std::clamp(q[0], -inner[0], inner[0]), std::clamp(q[1], -inner[1], inner[1]),
+                      std::clamp(q[2], -inner[2], inner[2]));
+        const double d = (q - c).length();
+        return d <= r ? p : rounded->toWorld(centre + c + (q - c) * (r / d));
+    };
+    auto ontoSphere = [&](const Vec3d& p) {
+        const Vec3d q = sphere->toLocal(p) - ball;
+        const double d = q.length();
+        return d <= radius ? p : sphere->toWorld(ball + q * (radius / d));
+    };
+    const auto reference = [&](const Vec3d& p) {
+        const double value = shape->value(p);
+        if (value >= 4.0 * dx || value <= 0.0) return value; // beyond; inside: the nearer surface
+        return intersectionDistance(ontoRounded, ontoSphere, p);
+    };
+    const double worst = expectLocalDistances(shape, reference, dx, 1e-4, "rounded box and sphere");
+    EXPECT_LT(worst, 1e-4);
 }
 
 TEST_F(TestTrueDistances, PlateWithAHoleIsTheDistanceToItsSurface)

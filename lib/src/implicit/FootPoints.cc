@@ -32,8 +32,11 @@ namespace {
 /// after different numbers of rounds differ by far less than a voxel's second differences can
 /// see (curvature stays smooth).
 constexpr int kMaxRounds = 12;
-/// The crease iteration's rounds between two pieces of planes and cone sides (creasePoint()).
-constexpr int kMaxPieceRounds = 48;
+/// The crease iteration's rounds (creasePoint()): where two surfaces meet at a shallow angle, or
+/// the crease curves tightly (a rounded box's edge) for its distance from the point, the
+/// tangential error shrinks by a constant factor near 1 a round. A round costs two values and
+/// gradients; the lattice search that takes a crease not found costs thousands of values.
+constexpr int kMaxCreaseRounds = 48;
 constexpr double kConverged = 1e-4;
 
 /// Whether a smooth-field round's point q has converged (kConverged, as @a converged world
@@ -407,6 +410,35 @@ bool pieceParts(const Implicit& f, std::vector<Piece>& out)
     return false;
 }
 
+/// Of two convex functions a and b with values @a fa, @a fb and gradients @a ga, @a gb at @a x:
+/// how near @a p a point where both are 0 can be. Such a point q lies in both half-spaces
+/// a(x) + ga . (q - x) <= 0 and b(x) + gb . (q - x) <= 0 (each function lies above its tangent
+/// plane): the distance from p to their intersection (0 if p is in it; else the nearest of p's
+/// projections onto either boundary that satisfies the other, and onto their common line).
+double convexCreaseFloor(const Vec3d& p, const Vec3d& x, double fa, const Vec3d& ga, double fb,
+                         const Vec3d& gb)
+{
+    const double la = ga.length(), lb = gb.length();
+    if (!(la > 0.0) || !(lb > 0.0)) return 0.0;
+    const Vec3d na = ga / la, nb = gb / lb;
+    // The half-spaces n . q <= o.
+    const double oa = dot(na, x) - fa / la, ob = dot(nb, x) - fb / lb;
+    const double ha = dot(na, p) - oa, hb = dot(nb, p) - ob; // p's heights above the planes
+    if (ha <= 0.0 && hb <= 0.0) return 0.0;
+    double best = std::numeric_limits<double>::infinity();
+    if (ha > 0.0 && hb - ha * dot(na, nb) <= 0.0) best = std::min(best, ha);
+    if (hb > 0.0 && ha - hb * dot(na, nb) <= 0.0) best = std::min(best, hb);
+    const double c = dot(na, nb), det = 1.0 - c * c;
+    if (det > 1e-12) {
+        const double ka = (ha - hb * c) / det, kb = (hb - ha * c) / det;
+        best = std::min(best, (na * ka + nb * kb).length());
+    } else if (!std::isfinite(best)) {
+        // Parallel planes facing opposite ways with no common point: no crease.
+        return c < 0.0 && oa + ob < 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
+    }
+    return std::isfinite(best) ? best : 0.0;
+}
+
 /// The point of the crease {a = 0} and {b = 0} closest to @a p, from @a start: rounds of a
 /// Gauss-Newton step onto both surfaces (the smallest move that zeroes both linearized values)
 /// and a move along the crease's tangent to the foot of the perpendicular from p, until
@@ -426,10 +458,7 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
     const double height = bounded ? a.value(p) : 0.0;
     const Vec3d q0 = p - a.n * height;
     double away = 0.0; // the largest bound on |q - q0| so far
-    // Planes and cone sides cost little a round: where they meet at a shallow angle (the
-    // tangential error shrinks by a constant factor a round) they get more rounds.
-    const int rounds = a.kind != Piece::Kind::Whole && b.kind != Piece::Kind::Whole
-                     ? kMaxPieceRounds : kMaxRounds;
+    const int rounds = kMaxCreaseRounds;
     for (int round = 0; round < rounds; ++round) {
         const double fa = a.value(q), fb = b.value(q);
         const Vec3d ga = a.gradient(q), gb = b.gradient(q);
@@ -439,6 +468,8 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
             away = std::max(away, len > 0.0 ? (dot(g, q0 - q) + fb) / len
                                             : std::numeric_limits<double>::infinity());
             floor = std::sqrt(height * height + away * away);
+        } else if (!bounded && a.convex && b.convex) {
+            floor = std::max(floor, convexCreaseFloor(p, q, fa, ga, fb, gb));
         }
         const double aa = dot(ga, ga), ab = dot(ga, gb), bb = dot(gb, gb);
         const double det = aa * bb - ab * ab; // |ga x gb|^2
