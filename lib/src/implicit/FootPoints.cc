@@ -1179,6 +1179,13 @@ void Offset::footPoints(const double* x, const double* y, const double* z, const
 void Shell::footPoints(const double* x, const double* y, const double* z, const double* values,
                        std::size_t n, const FootQuery& query, FootPoints& out) const
 {
+    if (mSolid) {
+        // The difference of the child's solids at t/2 and -t/2: the CSG's foot points.
+        double own[kMaxBatch];
+        mSolid->values(x, y, z, own, n);
+        mSolid->footPoints(x, y, z, own, n, query, out);
+        return;
+    }
     if (!mChild->isExactSdf()) return Implicit::footPoints(x, y, z, values, n, query, out);
     double f[kMaxBatch], sign[kMaxBatch];
     mChild->values(x, y, z, f, n);

@@ -191,6 +191,13 @@ Shell::Shell(Ptr child, double thickness): mChild(std::move(child)), mHalf(0.5 *
         OPENVDB_THROW(openvdb::ValueError, os.str());
     }
     mEroded = erodedShape(mChild, mHalf);
+    // Of a child whose value is not a distance (a CSG node), the shell's solid {|f| <= t/2} is
+    // its solid at t/2 less its solid at -t/2, each a shape of its own where known.
+    if (!mChild->isExactSdf() && mEroded) {
+        if (Ptr outer = dilatedShape(mChild, mHalf)) {
+            mSolid = std::make_shared<Csg>(CsgOp::Difference, std::vector<Ptr>{outer, mEroded});
+        }
+    }
 }
 
 double Shell::value(const Vec3d& p) const { return std::abs(mChild->value(p)) - mHalf; }
@@ -232,8 +239,9 @@ Interval Shell::interval(const BBoxd& box) const
 BBoxd Shell::boundingBox() const
 {
     const BBoxd box = mChild->boundingBox();
-    if (!mChild->isExactOutside() || !isFinite(box)) return infiniteBox();
-    return grown(box, mHalf);
+    if (mChild->isExactOutside() && isFinite(box)) return grown(box, mHalf);
+    if (mSolid) return mSolid->boundingBox();
+    return infiniteBox();
 }
 
 Implicit::Ptr Shell::prune(const BBoxd& box) const

@@ -123,6 +123,12 @@ void Transform::prepareSurface()
         mSurface = t->mSurface;
         return;
     }
+    if (const auto* sh = dynamic_cast<const Shell*>(mChild.get()); sh && sh->solid()) {
+        // Of a CSG node: the difference of its solids at t/2 and -t/2, mapped as a CSG node.
+        const std::shared_ptr<Transform> t(new Transform(sh->solid(), *this));
+        mSurface = t->mSurface;
+        return;
+    }
     if (const auto* sh = dynamic_cast<const Shell*>(mChild.get()); sh && sh->eroded()) {
         // The shell's solid is the child grown by t/2 less the child shrunk by t/2 (a smaller
         // box, capped cylinder or cone), each mapped with its own route: the smaller shape's

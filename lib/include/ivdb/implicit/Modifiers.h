@@ -70,7 +70,8 @@ public:
     void footPoints(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
-    /// The child's box grown by t/2 when the child is exact outside, else unbounded.
+    /// The child's box grown by t/2 when the child is exact outside, else the solid's (solid()),
+    /// else unbounded.
     BBoxd boundingBox() const override;
     bool isExactSdf() const override { return false; }
     /// For an exact SDF child: both of the shell's surfaces are offsets of the child's.
@@ -83,11 +84,15 @@ public:
     /// @brief The inner surface's solid (the child shrunk by t/2) as an exact SDF where one is
     /// known (erodedShape()), else null.
     const Ptr& eroded() const { return mEroded; }
+    /// @brief Of a child that is not an exact SDF (a CSG node): the shell's solid, the child's
+    /// solid at t/2 less its solid at -t/2 (dilatedShape(), erodedShape()), where both are
+    /// known; else null. Its foot points are this node's.
+    const Ptr& solid() const { return mSolid; }
 
 private:
     Ptr mChild;
     double mHalf; // t/2
-    Ptr mEroded;
+    Ptr mEroded, mSolid;
 };
 
 /// @brief The solid {child <= -delta}, @a delta > 0 (of an exact SDF, its points at least
