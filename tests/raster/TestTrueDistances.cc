@@ -643,6 +643,13 @@ TEST_F(TestTrueDistances, ShrunkRoundedBoxIsASmallerRoundedBoxOrABox)
     }
 }
 
+/// Two spheres of radius @a r at @a a and @a b combined by @a op.
+implicit::Implicit::Ptr twoSpheres(implicit::CsgOp op, const Vec3d& a, const Vec3d& b, double r)
+{
+    return std::make_shared<implicit::Csg>(op, std::vector<implicit::Implicit::Ptr>{
+        std::make_shared<implicit::Sphere>(a, r), std::make_shared<implicit::Sphere>(b, r)});
+}
+
 TEST_F(TestTrueDistances, GrownUnionIsTheUnionOfTheGrownParts)
 {
     // The points within d of a union are those within d of one of its parts: an offset d > 0 of
@@ -655,10 +662,7 @@ TEST_F(TestTrueDistances, GrownUnionIsTheUnionOfTheGrownParts)
     const double dx = 0.01, d = 0.05, r = 0.4;
     using implicit::Implicit;
     const Vec3d a(-0.25, 0.0, 0.0), b(0.25, 0.0, 0.0);
-    const auto spheres = std::make_shared<implicit::Offset>(
-        std::make_shared<implicit::Csg>(implicit::CsgOp::Union, std::vector<Implicit::Ptr>{
-            std::make_shared<implicit::Sphere>(a, r), std::make_shared<implicit::Sphere>(b, r)}),
-        d);
+    const auto spheres = std::make_shared<implicit::Offset>(twoSpheres(implicit::CsgOp::Union, a, b, r), d);
     const double worst = expectLocalDistances(spheres, [&](const Vec3d& p) {
         return twoSphereDistance(implicit::CsgOp::Union, a, b, r + d, p);
     }, dx, 1e-6, "two spheres grown");
@@ -705,7 +709,7 @@ TEST_F(TestTrueDistances, GrownUnionIsTheUnionOfTheGrownParts)
     EXPECT_LT(shallowest, 1e-4);
 }
 
-TEST_F(TestTrueDistances, OffsetOfACsgIsTheCsgOfItsPartsOffset)
+TEST_F(TestTrueDistances, OffsetAndShellOfACsgAreCsgsOfItsPartsOffset)
 {
     // A CSG node's value is the min or max of its terms, so its offset's surface {f = d} is the
     // CSG of its parts' {f_i = d} (a difference's cut at -d): spheres larger or smaller. Against
@@ -721,10 +725,7 @@ TEST_F(TestTrueDistances, OffsetOfACsgIsTheCsgOfItsPartsOffset)
             if ((op == CsgOp::Union && offset > 0.0) || (op == CsgOp::Intersection && offset < 0.0)) {
                 continue; // GrownUnionIsTheUnionOfTheGrownParts; a shrunk intersection above
             }
-            const auto shape = std::make_shared<implicit::Offset>(
-                std::make_shared<implicit::Csg>(op, std::vector<implicit::Implicit::Ptr>{
-                    std::make_shared<implicit::Sphere>(a, r), std::make_shared<implicit::Sphere>(b, r)}),
-                offset);
+            const auto shape = std::make_shared<implicit::Offset>(twoSpheres(op, a, b, r), offset);
             // The cut of a difference moves the other way: max(f_a, -f_b) = d where f_b = -d.
             const double rb = op == CsgOp::Difference ? r - offset : r + offset;
             const std::string what = std::string(op == CsgOp::Union ? "union" : op == CsgOp::Intersection
@@ -735,6 +736,26 @@ TEST_F(TestTrueDistances, OffsetOfACsgIsTheCsgOfItsPartsOffset)
             }, dx, 1e-6, what);
             EXPECT_LT(worst, 1e-6) << what;
         }
+    }
+    // The shell {|f| <= t/2} of a CSG node is its solid at t/2 less its solid at -t/2 (each the
+    // CSG of its parts offset): of two spheres, the distance to the nearer of the two CSGs of
+    // spheres of radii r + t/2 and r - t/2 (the cut of a difference the other way), negative
+    // between them, in closed form, for a union, an intersection and a difference. Before, the
+    // shell of a union iterated on its field (5,897 voxels to the lattice search, up to 0.2 voxel
+    // off), and that of an intersection or difference was refused as unbounded.
+    const double h = 0.03;
+    for (const CsgOp op : {CsgOp::Union, CsgOp::Intersection, CsgOp::Difference}) {
+        const auto shape = std::make_shared<implicit::Shell>(twoSpheres(op, a, b, r), 2.0 * h);
+        const double cut = op == CsgOp::Difference ? -1.0 : 1.0; // how B's radius moves
+        const std::string what = std::string(op == CsgOp::Union ? "union" : op == CsgOp::Intersection
+                                             ? "intersection" : "difference") + " shelled";
+        const double worst = expectLocalDistances(shape, [&](const Vec3d& p) {
+            const double outer = twoSphereDistance(op, a, r + h, b, r + cut * h, p);
+            const double inner = twoSphereDistance(op, a, r - h, b, r - cut * h, p);
+            const double d = std::min(std::abs(outer), std::abs(inner));
+            return outer < 0.0 && inner > 0.0 ? -d : d;
+        }, dx, 1e-6, what);
+        EXPECT_LT(worst, 1e-6) << what;
     }
 }
 
@@ -857,35 +878,6 @@ TEST_F(TestTrueDistances, RoundedBoxAndSphereIntersectedIsTheDistanceToItsSurfac
     };
     const double worst = expectLocalDistances(shape, reference, dx, 1e-4, "rounded box and sphere");
     EXPECT_LT(worst, 1e-4);
-}
-
-TEST_F(TestTrueDistances, ShellOfACsgIsItsSolidAtHalfTheThicknessLessItsSolidInside)
-{
-    // The shell {|f| <= t/2} of a CSG node is its solid at t/2 less its solid at -t/2 (each the
-    // CSG of its parts offset): of two spheres, the distance to the nearer of the two CSGs of
-    // spheres of radii r + t/2 and r - t/2 (the cut of a difference the other way), negative
-    // between them, in closed form, for a union, an intersection and a difference. Before, the
-    // shell of a union iterated on its field (5,897 voxels to the lattice search, up to 0.2 voxel
-    // off), and that of an intersection or difference was refused as unbounded.
-    const double dx = 0.01, r = 0.4, h = 0.03;
-    using implicit::CsgOp;
-    const Vec3d a(-0.25, 0.0, 0.0), b(0.25, 0.0, 0.0);
-    for (const CsgOp op : {CsgOp::Union, CsgOp::Intersection, CsgOp::Difference}) {
-        const auto shape = std::make_shared<implicit::Shell>(
-            std::make_shared<implicit::Csg>(op, std::vector<implicit::Implicit::Ptr>{
-                std::make_shared<implicit::Sphere>(a, r), std::make_shared<implicit::Sphere>(b, r)}),
-            2.0 * h);
-        const double cut = op == CsgOp::Difference ? -1.0 : 1.0; // how B's radius moves
-        const std::string what = std::string(op == CsgOp::Union ? "union" : op == CsgOp::Intersection
-                                             ? "intersection" : "difference") + " shelled";
-        const double worst = expectLocalDistances(shape, [&](const Vec3d& p) {
-            const double outer = twoSphereDistance(op, a, r + h, b, r + cut * h, p);
-            const double inner = twoSphereDistance(op, a, r - h, b, r - cut * h, p);
-            const double d = std::min(std::abs(outer), std::abs(inner));
-            return outer < 0.0 && inner > 0.0 ? -d : d;
-        }, dx, 1e-6, what);
-        EXPECT_LT(worst, 1e-6) << what;
-    }
 }
 
 TEST_F(TestTrueDistances, PlateWithAHoleIsTheDistanceToItsSurface)
