@@ -432,10 +432,9 @@ double convexCreaseFloor(const Vec3d& p, const Vec3d& x, double fa, const Vec3d&
     if (det > 1e-12) {
         const double ka = (ha - hb * c) / det, kb = (hb - ha * c) / det;
         best = std::min(best, (na * ka + nb * kb).length());
-    } else if (!std::isfinite(best)) {
-        // Parallel planes facing opposite ways with no common point: no crease.
-        return c < 0.0 && oa + ob < 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
     }
+    // Nearly parallel planes: their common line is too ill-conditioned to bound anything (two
+    // planes facing each other across a gap still meet, far away, unless exactly parallel).
     return std::isfinite(best) ? best : 0.0;
 }
 
