@@ -737,6 +737,20 @@ TEST_F(TestTrueDistances, OffsetAndShellOfACsgAreCsgsOfItsPartsOffset)
             EXPECT_LT(worst, 1e-6) << what;
         }
     }
+    // A part with nothing left at the level leaves the union: a small sphere shrunk away next to
+    // a large one is the large one shrunk (before, the small one's offset, empty, was searched
+    // for foot points it does not have, and the lattice search took the voxels near it).
+    {
+        const Vec3d small(0.14, 0.05, 0.0);
+        const auto shape = std::make_shared<implicit::Offset>(
+            std::make_shared<implicit::Csg>(CsgOp::Union, std::vector<implicit::Implicit::Ptr>{
+                std::make_shared<implicit::Sphere>(a, r), std::make_shared<implicit::Sphere>(small, 0.04)}),
+            -d);
+        const double worst = expectLocalDistances(shape, [&](const Vec3d& p) {
+            return (p - a).length() - (r - d);
+        }, dx, 1e-6, "union shrunk past a part");
+        EXPECT_LT(worst, 1e-6);
+    }
     // The shell {|f| <= t/2} of a CSG node is its solid at t/2 less its solid at -t/2 (each the
     // CSG of its parts offset): of two spheres, the distance to the nearer of the two CSGs of
     // spheres of radii r + t/2 and r - t/2 (the cut of a difference the other way), negative

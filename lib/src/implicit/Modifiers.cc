@@ -34,20 +34,29 @@ namespace {
 /// min or max of its terms, so its level set is the union or intersection of theirs (min(a, b)
 /// <= l where a <= l or b <= l; max(a, b) <= l where both are; max(a, -b) <= l where a <= l and
 /// b >= -l). A part's own {a <= l}: erodedShape() or dilatedShape() where known, else, of an
-/// exact SDF, its offset (whose foot points follow the part's gradient). Null if a part has
-/// none, or nothing is left of it.
+/// exact SDF, its offset (whose foot points follow the part's gradient). A part with nothing
+/// at that level (its values over its box all above it: a sphere thinner than the shrinking)
+/// leaves a union or a difference's cut, and empties an intersection or a difference. Null if a
+/// part has no such shape, or nothing is left.
 Implicit::Ptr csgLevelShape(const Csg& c, double level)
 {
     std::vector<Implicit::Ptr> parts;
     for (std::size_t k = 0; k < c.children().size(); ++k) {
         const Implicit::Ptr& part = c.children()[k];
-        const double l = c.op() == CsgOp::Difference && k > 0 ? -level : level;
+        const bool cut = c.op() == CsgOp::Difference && k > 0;
+        const double l = cut ? -level : level;
+        if (l < 0.0 && part->interval(part->boundingBox()).lo >= l) {
+            if (c.op() == CsgOp::Union || cut) continue;
+            return nullptr; // an empty intersection or difference
+        }
         Implicit::Ptr shape = l < 0.0 ? erodedShape(part, -l) : dilatedShape(part, l);
         if (!shape && part->isExactSdf() && l != 0.0) shape = std::make_shared<Offset>(part, l);
         if (!shape && l == 0.0) shape = part;
         if (!shape) return nullptr;
         parts.push_back(std::move(shape));
     }
+    if (parts.empty()) return nullptr;
+    if (parts.size() == 1) return parts.front();
     return std::make_shared<Csg>(c.op(), std::move(parts));
 }
 
