@@ -449,6 +449,7 @@ double convexCreaseFloor(const Vec3d& p, const Vec3d& x, double fa, const Vec3d&
 /// <= -b(x), at least (g.(q0 - x) + b(x)) / |g| from q0, p's foot on the plane. The largest such
 /// bound, with p's height above the plane, goes to @a floor (0 if none): a plane that passes
 /// near a cone's side without cutting it there has no crease for the rounds to converge to.
+/// Of two other convex pieces, each round's point bounds it likewise (convexCreaseFloor()).
 bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double tol,
                  Vec3d& out, double& floor)
 {
@@ -457,8 +458,7 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
     const double height = bounded ? a.value(p) : 0.0;
     const Vec3d q0 = p - a.n * height;
     double away = 0.0; // the largest bound on |q - q0| so far
-    const int rounds = kMaxCreaseRounds;
-    for (int round = 0; round < rounds; ++round) {
+    for (int round = 0; round < kMaxCreaseRounds; ++round) {
         const double fa = a.value(q), fb = b.value(q);
         const Vec3d ga = a.gradient(q), gb = b.gradient(q);
         if (bounded && fb > 0.0 && gb.lengthSqr() > 0.0) {
@@ -480,7 +480,7 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
         out = q;
         const double c = kConverged * tol;
         if (offA <= c && offB <= c && along <= c) return true;
-        if (round + 1 == rounds) return offA <= tol && offB <= tol && along <= tol;
+        if (round + 1 == kMaxCreaseRounds) return offA <= tol && offB <= tol && along <= tol;
         const double la = (fa * bb - fb * ab) / det, lb = (fb * aa - fa * ab) / det;
         q -= ga * la + gb * lb;
         q += t * dot(p - q, t);
@@ -1155,6 +1155,20 @@ void levelSetFeet(const Implicit& child, const double* x, const double* y, const
 
 } // namespace
 
+namespace {
+
+/// The foot points of a node's solid as a shape of its own (Offset::solid(), Shell::solid()),
+/// from that shape's values: the same surface and sign as the node's.
+void solidFootPoints(const Implicit& solid, const double* x, const double* y, const double* z,
+                     std::size_t n, const FootQuery& query, FootPoints& out)
+{
+    double own[kMaxBatch];
+    solid.values(x, y, z, own, n);
+    solid.footPoints(x, y, z, own, n, query, out);
+}
+
+} // namespace
+
 void Offset::footPoints(const double* x, const double* y, const double* z, const double* values,
                         std::size_t n, const FootQuery& query, FootPoints& out) const
 {
@@ -1163,10 +1177,7 @@ void Offset::footPoints(const double* x, const double* y, const double* z, const
         // Moving along the child's gradient reaches the shrunk surface near its sharp edges
         // only by the smooth iteration, which answered voxels up to 0.77 voxel too far there;
         // the grown surface of a union where the grown parts meet, likewise.
-        double own[kMaxBatch];
-        mSolid->values(x, y, z, own, n);
-        mSolid->footPoints(x, y, z, own, n, query, out);
-        return;
+        return solidFootPoints(*mSolid, x, y, z, n, query, out);
     }
     if (!mChild->isExactSdf()) return Implicit::footPoints(x, y, z, values, n, query, out);
     double f[kMaxBatch], sign[kMaxBatch];
@@ -1180,10 +1191,7 @@ void Shell::footPoints(const double* x, const double* y, const double* z, const 
 {
     if (mSolid) {
         // The difference of the child's solids at t/2 and -t/2: the CSG's foot points.
-        double own[kMaxBatch];
-        mSolid->values(x, y, z, own, n);
-        mSolid->footPoints(x, y, z, own, n, query, out);
-        return;
+        return solidFootPoints(*mSolid, x, y, z, n, query, out);
     }
     if (!mChild->isExactSdf()) return Implicit::footPoints(x, y, z, values, n, query, out);
     double f[kMaxBatch], sign[kMaxBatch];

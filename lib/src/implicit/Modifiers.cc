@@ -50,8 +50,7 @@ Implicit::Ptr csgLevelShape(const Csg& c, double level)
             return nullptr; // an empty intersection or difference
         }
         Implicit::Ptr shape = l < 0.0 ? erodedShape(part, -l) : dilatedShape(part, l);
-        if (!shape && part->isExactSdf() && l != 0.0) shape = std::make_shared<Offset>(part, l);
-        if (!shape && l == 0.0) shape = part;
+        if (!shape && part->isExactSdf()) shape = std::make_shared<Offset>(part, l);
         if (!shape) return nullptr;
         parts.push_back(std::move(shape));
     }

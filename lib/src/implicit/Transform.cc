@@ -115,29 +115,26 @@ void Transform::prepareSurface()
         m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
     }
     m[3][3] = 1.0;
-    if (const auto* o = dynamic_cast<const Offset*>(mChild.get()); o && o->solid()) {
-        // A shrunk box, capped cylinder or cone is a smaller one (Offset::solid()): the
-        // offset's surface is that shape's, mapped by its route below (a box's scaled box, a
-        // capped cone's quadric between its caps).
-        const std::shared_ptr<Transform> t(new Transform(o->solid(), *this));
+    // An offset or shell with a solid of its own (Offset::solid(): a shrunk box, capped cylinder
+    // or cone is a smaller one, a CSG node's is the CSG of its parts offset; Shell::solid(): the
+    // difference of a CSG node's solids at t/2 and -t/2): the surface is that solid's, mapped by
+    // its route below (a box's scaled box, a capped cone's quadric between its caps, a CSG's).
+    const auto* offset = dynamic_cast<const Offset*>(mChild.get());
+    const auto* shell = dynamic_cast<const Shell*>(mChild.get());
+    if (const Ptr solid = offset ? offset->solid() : shell ? shell->solid() : nullptr) {
+        const std::shared_ptr<Transform> t(new Transform(solid, *this));
         mSurface = t->mSurface;
         return;
     }
-    if (const auto* sh = dynamic_cast<const Shell*>(mChild.get()); sh && sh->solid()) {
-        // Of a CSG node: the difference of its solids at t/2 and -t/2, mapped as a CSG node.
-        const std::shared_ptr<Transform> t(new Transform(sh->solid(), *this));
-        mSurface = t->mSurface;
-        return;
-    }
-    if (const auto* sh = dynamic_cast<const Shell*>(mChild.get()); sh && sh->eroded()) {
+    if (shell && shell->eroded()) {
         // The shell's solid is the child grown by t/2 less the child shrunk by t/2 (a smaller
         // box, capped cylinder or cone), each mapped with its own route: the smaller shape's
         // below, exact; the grown one (rounded, smooth) the smooth iteration's. Inside, the
         // inner surface's sharp edges were left to the smooth iteration, which answered voxels
         // over a voxel off.
         std::vector<Ptr> parts;
-        for (const Ptr& k : {Ptr(std::make_shared<Offset>(sh->child(), 0.5 * sh->thickness())),
-                             sh->eroded()}) {
+        for (const Ptr& k : {Ptr(std::make_shared<Offset>(shell->child(), 0.5 * shell->thickness())),
+                             shell->eroded()}) {
             const std::shared_ptr<Transform> t(new Transform(k, *this));
             parts.push_back(t->mSurface ? t->mSurface : Ptr(t));
         }
