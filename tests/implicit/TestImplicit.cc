@@ -5,6 +5,7 @@
 #include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Implicit.h>
+#include <ivdb/implicit/Modifiers.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
 
@@ -967,6 +968,65 @@ TEST_F(TestImplicit, IsExactSdf)
     for (int k = 0; k < 200; ++k) {
         const Vec3d p = randomPoint();
         EXPECT_NEAR(plane->value(p), n.dot(p) - 0.4 / std::sqrt(14.0), 1e-12);
+    }
+}
+
+TEST_F(TestImplicit, IsDistanceBoundWhereTheFieldIs1Lipschitz)
+{
+    // isDistanceBound() lets the rasterizer skip every voxel with |f| >= band without finding
+    // its distance: it must hold only where f is 1-Lipschitz. Checked on random pairs of points
+    // (|f(p) - f(q)| <= |p - q|) for every node that claims it; the nodes that do not claim it
+    // here are not 1-Lipschitz, and the same check finds a pair that shows it.
+    const Ptr a = std::make_shared<Sphere>(Vec3d(-0.35, 0.0, 0.0), 0.6),
+              b = std::make_shared<Sphere>(Vec3d(0.35, 0.1, 0.0), 0.6),
+              box = std::make_shared<Box>(Vec3d(0.0, 0.3, 0.2), Vec3d(0.5, 0.7, 0.9));
+    const Ptr quadric = makeEllipsoid(Vec3d(0.1, 0.0, 0.0), Vec3d(1.0, 0.8, 0.6));
+    const Ptr onion = std::make_shared<Csg>(Csg::Op::Difference, std::vector<Ptr>{a, b, box});
+    const Ptr blend = std::make_shared<Blend>(Csg::Op::Union, 20.0, std::vector<Ptr>{a, b, box});
+    const Ptr smooth = std::make_shared<Blend>(Csg::Op::Intersection, BlendKernel::polynomial(0.3),
+                                               std::vector<Ptr>{a, box});
+    const Vec3d squash(1.4, 0.6, 1.0);
+    const std::vector<std::pair<std::string, Ptr>> bounds = {
+        {"sphere", a},
+        {"box", box},
+        {"difference", onion},
+        {"blend", blend},
+        {"smooth", smooth},
+        {"scaled sphere", std::make_shared<Transform>(a, Vec3d(0.1, 0, 0), Vec3d(10, 20, 30), squash)},
+        {"scaled blend", std::make_shared<Transform>(blend, Vec3d(0), Vec3d(-30, 5, 60), squash)},
+        {"offset of a difference", std::make_shared<Offset>(onion, -0.05)},
+        {"shell of a smooth CSG", std::make_shared<Shell>(smooth, 0.1)},
+        {"blend of scaled spheres", std::make_shared<Blend>(
+            Csg::Op::Union, 8.0, std::vector<Ptr>{std::make_shared<Transform>(a, Vec3d(0), Vec3d(0), squash),
+                                                  std::make_shared<Transform>(b, Vec3d(0), Vec3d(0), squash)})},
+    };
+    const std::vector<std::pair<std::string, Ptr>> others = {
+        {"ellipsoid", quadric},
+        {"scaled ellipsoid", std::make_shared<Transform>(quadric, Vec3d(0), Vec3d(0), squash)},
+        {"union with an ellipsoid", std::make_shared<Csg>(Csg::Op::Union, std::vector<Ptr>{a, quadric})},
+        {"blend with an ellipsoid", std::make_shared<Blend>(Csg::Op::Union, 20.0, std::vector<Ptr>{a, quadric})},
+        {"offset of an ellipsoid", std::make_shared<Offset>(quadric, 0.1)},
+    };
+    auto worstRatio = [&](const Implicit& f) {
+        double worst = 0.0;
+        for (int i = 0; i < 20000; ++i) {
+            const Vec3d p(uniform(-1.6, 1.6), uniform(-1.6, 1.6), uniform(-1.6, 1.6));
+            const Vec3d q = p + Vec3d(uniform(-0.2, 0.2), uniform(-0.2, 0.2), uniform(-0.2, 0.2));
+            if ((q - p).length() < 1e-6) continue;
+            worst = std::max(worst, std::abs(f.value(q) - f.value(p)) / (q - p).length());
+        }
+        return worst;
+    };
+    for (const auto& [what, f] : bounds) {
+        EXPECT_TRUE(f->isDistanceBound()) << what;
+        EXPECT_LE(worstRatio(*f), 1.0 + 1e-9) << what;
+        // And so is its pruned node, which the rasterizer evaluates.
+        const Ptr pruned = f->prune(BBoxd(Vec3d(-0.2, -0.1, 0.0), Vec3d(0.1, 0.2, 0.3)));
+        EXPECT_TRUE(pruned->isDistanceBound()) << what;
+    }
+    for (const auto& [what, f] : others) {
+        EXPECT_FALSE(f->isDistanceBound()) << what;
+        EXPECT_GT(worstRatio(*f), 1.05) << what;
     }
 }
 

@@ -228,6 +228,14 @@ Blend::Blend(Op op, const BlendKernel& kernel, std::vector<Ptr> children)
     }
 }
 
+bool Blend::isDistanceBound() const
+{
+    for (const auto& c : mChildren) {
+        if (!c->isDistanceBound()) return false;
+    }
+    return true;
+}
+
 std::string Blend::typeName() const
 {
     return mKernel.kind == BlendKernel::Kind::SuperElliptic ? "blend" : "smooth";

@@ -191,6 +191,14 @@ BBoxd Csg::boundingBox() const
     return infiniteBox();
 }
 
+bool Csg::isDistanceBound() const
+{
+    for (const auto& c : mChildren) {
+        if (!c->isDistanceBound()) return false;
+    }
+    return true;
+}
+
 bool Csg::isExactOutside() const
 {
     if (mOp != Op::Union) return isExactSdf();

@@ -796,8 +796,18 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
 {
     const Vec3d p(mX[i], mY[i], mZ[i]);
     mNear.clear();
+    std::size_t deepest = 0;
     for (std::size_t c = 0; c < size(); ++c) {
-        if (sign(c) * distance(c, i) < mQuery.far) mNear.push_back(c);
+        const double t = sign(c) * distance(c, i);
+        if (t < mQuery.far) mNear.push_back(c);
+        if (t == u) deepest = c;
+    }
+    // The deepest term's foot point, where it lies outside every other term, is the nearest
+    // point: it is -u away, and every point of the union's surface is at least as far (it lies
+    // outside the deepest term, whose surface is -u away).
+    if (foot(deepest, i, nearest) && outsideOthers(p, nearest, {deepest})) {
+        depth = std::min((p - nearest).length(), mQuery.far);
+        if (depth <= -u + mQuery.tolerance) return true;
     }
     // Nearest surfaces first: a crease (or corner) point of terms a and b is |p - q| >= |d_a|
     // and >= |d_b| away (the distance to each surface is at most that), so once a term is as far
@@ -991,16 +1001,16 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
     std::size_t idx[kMaxBatch], m = 0;
     double sx[kMaxBatch], sy[kMaxBatch], sz[kMaxBatch];
-    for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t i = 0; i < n; ++i) { // without branches: m moves on for the others
         out.x[i] = x[i];
         out.y[i] = y[i];
         out.z[i] = z[i];
         out.distance[i] = values[i];
-        out.ok[i] = rho * values[i] > 0.0;
-        if (out.ok[i]) continue;
+        const bool done = rho * values[i] > 0.0;
+        out.ok[i] = done;
         idx[m] = i;
         sx[m] = x[i], sy[m] = y[i], sz[m] = z[i];
-        ++m;
+        m += !done;
     }
     if (m == 0) return;
     FootPoints sub;

@@ -77,7 +77,7 @@ struct Context
     int reachSteps = 0;     // non-exact: voxel steps from the interface a band voxel can be
     double reach = 0.0;     // world distance a box is dilated by before the interval test
     detail::DistanceSettings distances; // non-exact: how true distances are found
-    bool boundedByDistance = false; // non-exact: |f| <= the distance (a CSG of exact SDFs)
+    bool boundedByDistance = false; // non-exact: |f| <= the distance (Implicit::isDistanceBound)
     CoordBBox region;       // index box that holds every voxel of the result
     openvdb::util::NullInterrupter* interrupter = nullptr;
     std::uint64_t memoryLimit = 0;
@@ -226,25 +226,30 @@ LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, boo
     auto leaf = std::make_unique<LeafT>(origin, bg);
     float* buf = leaf->buffer().data();
     auto& mask = leaf->getValueMask();
-    bool anyActive = false, anyOutside = false;
-    for (int n = 0; n < 512; ++n) {
-        if (std::isnan(v[n])) {
-            // Unknown: fast sweeping decides it later (sweepUnknown); kept active till then.
-            buf[n] = 0.0f;
-            mask.setOn(n);
-            anyActive = true;
-            if (counts) counts->unknown.push_back(leaf->offsetToGlobalCoord(n));
-            continue;
+    // The values and the mask a word at a time, in loops without branches (whether a voxel is
+    // in the band is close to random along a row); unknown voxels (rare) after.
+    bool anyActive = false, anyOutside = false, anyUnknown = false;
+    for (int w = 0; w < 8; ++w) {
+        std::uint64_t word = 0;
+        for (int b = 0; b < 64; ++b) {
+            const int n = 64 * w + b;
+            const float fv = static_cast<float>(v[n]);
+            const bool in = ctx.inBand(fv); // false for an unknown (NaN)
+            buf[n] = in ? fv : (fv > 0.0f ? bg : -bg);
+            word |= std::uint64_t(in) << b;
+            anyOutside = anyOutside | (!in & (fv > 0.0f));
+            anyUnknown = anyUnknown | std::isnan(fv);
         }
-        const float fv = static_cast<float>(v[n]);
-        if (ctx.inBand(fv)) {
-            buf[n] = fv;
-            mask.setOn(n);
-            anyActive = true;
-        } else {
-            buf[n] = fv > 0.0f ? bg : -bg;
-            anyOutside = anyOutside || fv > 0.0f;
-        }
+        mask.getWord<std::uint64_t>(w) = word;
+        anyActive = anyActive | (word != 0);
+    }
+    for (int n = 0; anyUnknown && n < 512; ++n) {
+        if (!std::isnan(v[n])) continue;
+        // Unknown: fast sweeping decides it later (sweepUnknown); kept active till then.
+        buf[n] = 0.0f;
+        mask.setOn(n);
+        anyActive = true;
+        if (counts) counts->unknown.push_back(leaf->offsetToGlobalCoord(n));
     }
     if (!anyActive) {
         inside = !anyOutside;
@@ -840,7 +845,7 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         }
         ctx.exact = true; // the stored value is f itself
     }
-    ctx.boundedByDistance = !ctx.exact && isCsgOfDistances(*ctx.shape);
+    ctx.boundedByDistance = !ctx.exact && ctx.shape->isDistanceBound();
     ctx.interrupter = s.interrupter;
     ctx.memoryLimit = s.memoryLimit;
     if (ctx.exact) {

@@ -109,6 +109,9 @@ public:
     /// difference: within the sharp result.
     BBoxd boundingBox() const override;
     bool isExactSdf() const override { return false; }
+    /// Of 1-Lipschitz children: both kernels' gradients are convex combinations of the
+    /// children's (the weights d f / d t_i are >= 0 and sum to 1).
+    bool isDistanceBound() const override;
     std::string typeName() const override;
 
     Op op() const { return mOp; }

@@ -35,6 +35,8 @@ public:
     bool isExactSdf() const override;
     /// A union of shapes exact outside is the distance outside it.
     bool isExactOutside() const override;
+    /// Min and max of 1-Lipschitz children are 1-Lipschitz.
+    bool isDistanceBound() const override;
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override;
 
@@ -102,6 +104,9 @@ public:
     BBoxd boundingBox() const override;
     bool isExactSdf() const override;
     bool isExactOutside() const override;
+    /// Of a 1-Lipschitz child, at any scale (the point moves by at most 1 / min(scale) in the
+    /// child's space per unit in the world's).
+    bool isDistanceBound() const override { return mChild->isDistanceBound(); }
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "transform"; }
 

@@ -110,6 +110,11 @@ public:
     /// SDFs, unions of such, shapes grown from them. Where this holds, the shape's inside lies
     /// within a distance d of the points where value() < d, which bounds grown shapes.
     virtual bool isExactOutside() const { return isExactSdf(); }
+    /// @brief True if |value()| never exceeds the distance to the surface: value() is
+    /// 1-Lipschitz (exact SDFs; CSG nodes, blends, offsets and shells of such, and their
+    /// transforms, a non-uniform scale's value being min(scale) times its child's). Where this
+    /// holds, a point with |value()| >= d is at least d from the surface.
+    virtual bool isDistanceBound() const { return isExactSdf(); }
     /// @brief A node equal to this one at every point of @a box, possibly simpler
     /// (a union drops children that cannot be the minimum there).
     virtual Ptr prune(const BBoxd& box) const;

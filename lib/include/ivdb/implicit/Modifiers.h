@@ -33,6 +33,7 @@ public:
     bool isExactSdf() const override { return false; }
     /// Grown (d >= 0) from a shape exact outside: f - d is the distance outside.
     bool isExactOutside() const override;
+    bool isDistanceBound() const override { return mChild->isDistanceBound(); }
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "offset"; }
 
@@ -76,6 +77,7 @@ public:
     bool isExactSdf() const override { return false; }
     /// For an exact SDF child: both of the shell's surfaces are offsets of the child's.
     bool isExactOutside() const override { return mChild->isExactSdf(); }
+    bool isDistanceBound() const override { return mChild->isDistanceBound(); }
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "shell"; }
 
