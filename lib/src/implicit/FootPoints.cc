@@ -11,6 +11,7 @@
 #include "../util/Simd.h"
 #include "Feet.h"
 #include "Scratch.h"
+#include "SphereMath.h"
 
 #include <algorithm>
 #include <array>
@@ -924,6 +925,29 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
 
 namespace {
 
+/// The second least of @a m spheres' values (rows as Csg::mSpheres) at @a n points (the least
+/// is the union's value): Sphere::values()' arithmetic, a loop over the points per sphere,
+/// which vectorizes.
+IVDB_VECTOR_CLONES
+void sphereUnionSecond(const double* __restrict s, std::size_t m, const double* __restrict x,
+                       const double* __restrict y, const double* __restrict z, std::size_t n,
+                       double* __restrict second)
+{
+    double least[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        least[i] = std::numeric_limits<double>::max();
+        second[i] = std::numeric_limits<double>::max();
+    }
+    for (std::size_t c = 0; c < m; ++c) {
+        const double cx = s[c], cy = s[m + c], cz = s[2 * m + c], r = s[3 * m + c];
+        for (std::size_t i = 0; i < n; ++i) {
+            const double v = detail::sphereValue(x[i], y[i], z[i], cx, cy, cz, r);
+            second[i] = std::min(second[i], std::max(least[i], v));
+            least[i] = std::min(least[i], v);
+        }
+    }
+}
+
 /// Csg::footPoints at every point (the children's distances, then the lead rule or the nearest
 /// point inside).
 void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
@@ -1013,6 +1037,25 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
         m += !done;
     }
     if (m == 0) return;
+    if (mOp == Op::Union && !mSpheres.empty()) {
+        // A union of spheres: the next term after the deciding one from its rows in one
+        // vectorized pass, and the lead and far rules settle most inside points here, without
+        // the terms' set-up (csgFootPoints decides them so too, from the same values).
+        double second[kMaxBatch];
+        sphereUnionSecond(mSpheres.data(), mChildren.size(), sx, sy, sz, m, second);
+        std::size_t left = 0;
+        for (std::size_t k = 0; k < m; ++k) {
+            const std::size_t i = idx[k];
+            const double u = values[i];
+            const bool done = leadKeepsDistance(u, second[k], 0.0) || -u >= query.far;
+            out.ok[i] = done; // its distance is u already
+            idx[left] = i;
+            sx[left] = sx[k], sy[left] = sy[k], sz[left] = sz[k];
+            left += !done;
+        }
+        m = left;
+        if (m == 0) return;
+    }
     FootPoints sub;
     csgFootPoints(mChildren, mOp, sx, sy, sz, m, query, sub);
     for (std::size_t k = 0; k < m; ++k) {
