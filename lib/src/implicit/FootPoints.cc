@@ -948,6 +948,50 @@ void sphereUnionSecond(const double* __restrict s, std::size_t m, const double* 
     }
 }
 
+/// Inside a union of @a m spheres (rows as Csg::mSpheres), at @a n points of union value @a u:
+/// the deepest sphere's foot point q (the radial projection) and its distance @a depth (at most
+/// @a far), found where q lies outside every other sphere within @a tol and depth <= -u + tol
+/// (then it is the nearest point of the union's surface). Loops over the points per sphere.
+IVDB_VECTOR_CLONES
+void sphereUnionDeepestFeet(const double* __restrict s, std::size_t m, const double* __restrict x,
+                            const double* __restrict y, const double* __restrict z,
+                            const double* __restrict u, std::size_t n, double tol, double far,
+                            double* __restrict qx, double* __restrict qy, double* __restrict qz,
+                            double* __restrict depth, bool* __restrict found)
+{
+    // The deepest sphere (the last whose value is u, as CsgTerms::nearestInside() takes it).
+    std::size_t deepest[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) deepest[i] = 0;
+    for (std::size_t c = 0; c < m; ++c) {
+        const double cx = s[c], cy = s[m + c], cz = s[2 * m + c], r = s[3 * m + c];
+        for (std::size_t i = 0; i < n; ++i) {
+            const double v = detail::sphereValue(x[i], y[i], z[i], cx, cy, cz, r);
+            deepest[i] = v == u[i] ? c : deepest[i];
+        }
+    }
+    bool outside[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t c = deepest[i];
+        const Vec3d centre(s[c], s[m + c], s[2 * m + c]), p(x[i], y[i], z[i]);
+        const Vec3d r = p - centre;
+        const double len = r.length();
+        const Vec3d q = len > 0.0 ? centre + r * (s[3 * m + c] / len) : p;
+        qx[i] = q[0], qy[i] = q[1], qz[i] = q[2];
+        depth[i] = std::min((p - q).length(), far);
+        outside[i] = len > 0.0;
+    }
+    for (std::size_t c = 0; c < m; ++c) {
+        const double cx = s[c], cy = s[m + c], cz = s[2 * m + c];
+        const double least = s[3 * m + c] - tol, least2 = least * least;
+        for (std::size_t i = 0; i < n; ++i) {
+            const double dx = qx[i] - cx, dy = qy[i] - cy, dz = qz[i] - cz;
+            const bool out = least <= 0.0 || dx * dx + dy * dy + dz * dz >= least2;
+            outside[i] = outside[i] && (deepest[i] == c || out);
+        }
+    }
+    for (std::size_t i = 0; i < n; ++i) found[i] = outside[i] && depth[i] <= -u[i] + tol;
+}
+
 /// Csg::footPoints at every point (the children's distances, then the lead rule or the nearest
 /// point inside).
 void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
@@ -1052,6 +1096,27 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
             idx[left] = i;
             sx[left] = sx[k], sy[left] = sy[k], sz[left] = sz[k];
             left += !done;
+        }
+        m = left;
+        if (m == 0) return;
+        // Then the deepest sphere's foot point, where it lies outside every other sphere: the
+        // nearest point (CsgTerms::nearestInside()'s first candidate, the same arithmetic).
+        double u[kMaxBatch], qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch], depth[kMaxBatch];
+        for (std::size_t k = 0; k < m; ++k) u[k] = values[idx[k]];
+        bool found[kMaxBatch];
+        sphereUnionDeepestFeet(mSpheres.data(), mChildren.size(), sx, sy, sz, u, m,
+                               query.tolerance, query.far, qx, qy, qz, depth, found);
+        left = 0;
+        for (std::size_t k = 0; k < m; ++k) {
+            const std::size_t i = idx[k];
+            if (found[k]) {
+                out.distance[i] = -depth[k];
+                out.ok[i] = true;
+                out.x[i] = qx[k], out.y[i] = qy[k], out.z[i] = qz[k];
+            }
+            idx[left] = i;
+            sx[left] = sx[k], sy[left] = sy[k], sz[left] = sz[k];
+            left += !found[k];
         }
         m = left;
         if (m == 0) return;
