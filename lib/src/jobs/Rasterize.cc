@@ -132,8 +132,10 @@ void throwNoVoxels(const RasterizeOptions& opt, const raster::RasterSettings& se
 
 namespace {
 
+/// @a loadSeconds: the time it took to read the scene (its meshes and .vdb inputs included),
+/// counted in the compute and total times.
 RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& sc,
-                               std::optional<int> frame)
+                               std::optional<int> frame, double loadSeconds)
 {
     Stopwatch clock;
     if (!opt.output.empty()) io::checkOutputPath(opt.output);
@@ -143,7 +145,7 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
     raster::RasterSettings& settings = result.settings;
     settings.stats = &result.stats;
     withSceneErrors(opt, [&] { result.surface = raster::rasterize(sc.shape, settings); });
-    result.computeSeconds = clock.lap();
+    result.computeSeconds = loadSeconds + clock.lap();
     result.activeVoxels = result.surface->activeVoxelCount();
     if (result.activeVoxels == 0) throwNoVoxels(opt, settings, frame);
     settings.stats = nullptr;
@@ -151,7 +153,7 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
     stampRaster(*result.surface, opt, sc, settings, frame);
     if (opt.fog) result.density = detail::fogWithStamps(*result.surface);
     result.fileBytes = detail::writeGrids(opt.output, {result.surface, result.density}, opt.write);
-    result.totalSeconds = clock.total();
+    result.totalSeconds = loadSeconds + clock.total();
     return result;
 }
 
@@ -159,9 +161,10 @@ RasterizeResult rasterizeScene(const RasterizeOptions& opt, const scene::Scene& 
 
 RasterizeResult rasterize(const RasterizeOptions& opt)
 {
+    Stopwatch load;
     const scene::Scene sc = loadRasterScene(opt, std::nullopt, true);
     if (sc.animated) throwAnimated(opt);
-    return rasterizeScene(opt, sc, std::nullopt);
+    return rasterizeScene(opt, sc, std::nullopt, load.lap());
 }
 
 void throwAnimated(const RasterizeOptions& opt)
@@ -266,7 +269,9 @@ public:
             RasterizeOptions one = mOpt.base;
             one.output = report.output;
             one.interrupter = mOpt.base.interrupter ? &progress : nullptr;
-            report.result = rasterizeScene(one, loadRasterScene(one, report.frame, true), report.frame);
+            Stopwatch load;
+            const scene::Scene sc = loadRasterScene(one, report.frame, true);
+            report.result = rasterizeScene(one, sc, report.frame, load.lap());
             // A written frame is in its file: frames that wait for an earlier one to be reported
             // keep no grid, so a sequence holds only the frames being made.
             if (!report.output.empty()) {
