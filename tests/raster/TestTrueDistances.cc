@@ -1314,3 +1314,46 @@ TEST_F(TestTrueDistances, DataScenesNeedNoSweeping)
     }
     EXPECT_GE(scenes, 8u);
 }
+
+TEST_F(TestTrueDistances, RandomCappedConesAndBoxesIntersectedAreTheirDistance)
+{
+    // 24 random capped cylinders and cones, each intersected with a rotated box, against
+    // Dykstra's projections (as CsgOfCappedConesAndBoxesIsTheDistanceToItsSurface). Where a box
+    // face cuts a cone's side obliquely, their crease is an ellipse (a conic) that can curve
+    // within the distance: the crease iteration's straight move along its tangent overshot, its
+    // rounds alternated about the foot point and did not converge, and three of these shapes
+    // left 2, 31 and 1 voxels to the lattice search, up to 0.4 voxel off; now none.
+    std::mt19937 rng(4242);
+    auto u = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+    const double dx = 0.02;
+    for (int t = 0; t < 24; ++t) {
+        const Vec3d a(u(-0.3, 0.3), u(-0.3, 0.3), u(-0.5, -0.2)), b(u(-0.3, 0.3), u(-0.3, 0.3), u(0.2, 0.5));
+        const bool cylinder = t % 2 == 0;
+        const double ra = u(0.15, 0.4), rb = cylinder ? ra : u(0.05, 0.3);
+        const Vec3d half(u(0.15, 0.35), u(0.15, 0.35), u(0.15, 0.35));
+        const Vec3d centre(u(-0.1, 0.1), u(-0.1, 0.1), u(-0.1, 0.1));
+        const implicit::Transform box(std::make_shared<implicit::Box>(centre, half * 2.0), Vec3d(0.0),
+                                      Vec3d(u(-60, 60), u(-60, 60), u(-60, 60)), Vec3d(1.0));
+        const auto shape = std::make_shared<implicit::Csg>(implicit::CsgOp::Intersection,
+            std::vector<implicit::Implicit::Ptr>{
+                std::make_shared<implicit::CappedCone>(a, b, ra, rb, cylinder ? "capped_cylinder" : "capped_cone"),
+                box.moved(box.child())});
+        auto ontoBox = [&](const Vec3d& p) {
+            const Vec3d q = box.toLocal(p) - centre;
+            return box.toWorld(centre + Vec3d(std::clamp(q[0], -half[0], half[0]),
+                                              std::clamp(q[1], -half[1], half[1]),
+                                              std::clamp(q[2], -half[2], half[2])));
+        };
+        const auto reference = [&](const Vec3d& p) {
+            const double value = shape->value(p);
+            if (value >= 4.0 * dx) return value; // a lower bound outside: beyond the band
+            if (value <= 0.0) return value;      // inside an intersection: the nearer surface
+            return intersectionDistance(
+                [&](const Vec3d& q) { return nearestOfCappedCone(a, b, ra, rb, q); }, ontoBox, p);
+        };
+        const std::string what = (cylinder ? "capped cylinder " : "capped cone ") + std::to_string(t);
+        // Within the certified tolerance (1e-3 voxel); most within 1e-6, one at 4.2e-4.
+        const double worst = expectLocalDistances(shape, reference, dx, 1e-3, what, 0.9);
+        EXPECT_LT(worst, 1e-3) << what;
+    }
+}

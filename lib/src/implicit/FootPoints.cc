@@ -459,6 +459,11 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
     const double height = bounded ? a.value(p) : 0.0;
     const Vec3d q0 = p - a.n * height;
     double away = 0.0; // the largest bound on |q - q0| so far
+    // The move along the crease's tangent assumes a straight crease; where it curves within the
+    // distance, the move can overshoot, by a near constant factor, and the rounds alternate about
+    // the foot point. After an overshoot, that factor (the gain: how much of the last move the
+    // gap along the tangent closed) divides the next move (a secant step).
+    double lastGap = 0.0, lastMove = 0.0;
     for (int round = 0; round < kMaxCreaseRounds; ++round) {
         const double fa = a.value(q), fb = b.value(q);
         const Vec3d ga = a.gradient(q), gb = b.gradient(q);
@@ -477,14 +482,21 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
         Vec3d t = ga.cross(gb);
         t /= std::sqrt(det);
         const double offA = std::abs(fa) / std::sqrt(aa), offB = std::abs(fb) / std::sqrt(bb);
-        const double along = std::abs(dot(p - q, t));
+        const double gap = dot(p - q, t), along = std::abs(gap);
         out = q;
         const double c = kConverged * tol;
         if (offA <= c && offB <= c && along <= c) return true;
         if (round + 1 == kMaxCreaseRounds) return offA <= tol && offB <= tol && along <= tol;
         const double la = (fa * bb - fb * ab) / det, lb = (fb * aa - fa * ab) / det;
         q -= ga * la + gb * lb;
-        q += t * dot(p - q, t);
+        double gain = 1.0;
+        if (lastMove != 0.0 && (gap < 0.0) != (lastGap < 0.0)) {
+            const double g = (lastGap - gap) / lastMove;
+            if (g > 1.0 && g < 10.0) gain = g;
+        }
+        lastGap = dot(p - q, t);
+        lastMove = lastGap / gain;
+        q += t * lastMove;
     }
     return false;
 }
@@ -573,6 +585,61 @@ int sphereCorners(const std::array<const Sphere*, 3>& s, Vec3d out[2])
     out[0] = base + ez * z;
     out[1] = base - ez * z;
     return z > 0.0 ? 2 : 1;
+}
+
+/// Where two planes and a cone's side meet, in closed form: the planes' line o + t d cuts the
+/// side's cone (radius r + slope s at s along the axis) where its distance from the axis equals
+/// that radius, a quadratic in t; both roots (0 to 2 into @a out) where the radius is not
+/// negative (the nappe the side is on). -1 unless @a f is two planes and a side, or the planes
+/// are parallel.
+int planePlaneSideCorners(const std::array<const Piece*, 3>& f, const Vec3d& p, Vec3d out[2])
+{
+    const Piece *a = nullptr, *b = nullptr, *side = nullptr;
+    for (const Piece* k : f) {
+        if (k->kind == Piece::Kind::Side && !side) side = k;
+        else if (k->kind == Piece::Kind::Plane && !a) a = k;
+        else if (k->kind == Piece::Kind::Plane && !b) b = k;
+        else return -1;
+    }
+    if (!a || !b || !side) return -1;
+    const double c = dot(a->n, b->n), det = 1.0 - c * c;
+    if (!(det > 1e-12)) return -1;
+    // The line's point nearest p (as nearestCreasePoint()) and its unit direction.
+    const double fa = a->value(p), fb = b->value(p);
+    const Vec3d o = p - a->n * ((fa - fb * c) / det) - b->n * ((fb - fa * c) / det);
+    const Vec3d d = a->n.cross(b->n) / std::sqrt(det);
+    // Radial part R0 + t Rd from the axis, and the radius c0 + c1 t, at o + t d.
+    const Vec3d w0 = o - side->a;
+    const double s0 = dot(w0, side->n), sd = dot(d, side->n);
+    const Vec3d r0 = w0 - side->n * s0, rd = d - side->n * sd;
+    const double c0 = side->r + side->slope * s0, c1 = side->slope * sd;
+    // |R0 + t Rd|^2 = (c0 + c1 t)^2.
+    const double qa = rd.lengthSqr() - c1 * c1, qb = dot(r0, rd) - c0 * c1,
+                 qc = r0.lengthSqr() - c0 * c0;
+    double roots[2];
+    int count = 0;
+    const double scale = rd.lengthSqr() + c1 * c1;
+    if (std::abs(qa) <= 1e-12 * scale) {
+        // The line parallel to a generator of the cone (or to the cylinder's axis): one root
+        // at most, 2 qb t + qc = 0.
+        if (std::abs(qb) > 0.0) roots[count++] = -qc / (2.0 * qb);
+    } else {
+        const double disc = qb * qb - qa * qc;
+        if (disc < 0.0) return 0;
+        // The root of larger magnitude first, the other from their product (no cancellation).
+        const double big = -(qb + std::copysign(std::sqrt(disc), qb));
+        if (big != 0.0) {
+            roots[count++] = big / qa;
+            roots[count++] = qc / big;
+        } else {
+            roots[count++] = 0.0; // qb = 0 and disc = 0: a double root at t = 0
+        }
+    }
+    int kept = 0;
+    for (int k = 0; k < count; ++k) {
+        if (std::isfinite(roots[k]) && c0 + c1 * roots[k] >= 0.0) out[kept++] = o + d * roots[k];
+    }
+    return kept;
 }
 
 /// The point where the surfaces of @a f[0..2] meet nearest @a start: Newton's method on the
@@ -891,16 +958,18 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
                 continue;
             }
             if (onPieces({&pa, &pb}, q) && outsideOthers(p, q, {pa.term, pb.term})) offer(q);
-            // Where a third surface cuts this crease: a corner (both of three spheres' in
-            // closed form, else the one Newton's method finds from q).
+            // Where a third surface cuts this crease: a corner (both of three spheres', and of
+            // two planes and a cone's side, in closed form; else the one Newton's method finds
+            // from q).
             for (std::size_t k = b + 1; k < mPieces.size() && !beyond(mPieces[k]); ++k) {
                 const NearPiece& pk = mPieces[k];
                 Vec3d corners[2];
-                const int found = sphereCorners({sphereOf(pa), sphereOf(pb), sphereOf(pk)},
-                                                corners);
-                const int count = found >= 0 ? found
-                                : cornerPoint({pa.piece, pb.piece, pk.piece}, q,
-                                              mQuery.tolerance, corners[0]) ? 1 : 0;
+                int count = sphereCorners({sphereOf(pa), sphereOf(pb), sphereOf(pk)}, corners);
+                if (count < 0) count = planePlaneSideCorners({pa.piece, pb.piece, pk.piece}, p, corners);
+                if (count < 0) {
+                    count = cornerPoint({pa.piece, pb.piece, pk.piece}, q, mQuery.tolerance,
+                                        corners[0]) ? 1 : 0;
+                }
                 for (int c = 0; c < count; ++c) {
                     if (onPieces({&pa, &pb, &pk}, corners[c]) &&
                         outsideOthers(p, corners[c], {pa.term, pb.term, pk.term})) {
