@@ -223,7 +223,9 @@ LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, boo
     if (ctx.exact) f.values(x, y, z, v, 512);
     else leafDistances(ctx, f, origin, x, y, z, v, counts);
     const float bg = static_cast<float>(ctx.band);
-    auto leaf = std::make_unique<LeafT>(origin, bg);
+    // The buffer left unfilled: every value is written below.
+    auto leaf = std::make_unique<LeafT>(openvdb::PartialCreate(), origin, bg);
+    leaf->buffer().allocate();
     float* buf = leaf->buffer().data();
     auto& mask = leaf->getValueMask();
     // The values and the mask a word at a time, in loops without branches (whether a voxel is
