@@ -682,9 +682,13 @@ namespace {
 class CsgTerms
 {
 public:
+    /// @a deepestTried: the deepest term's foot point was already tried at every point
+    /// (nearestInside() does not try it again).
     CsgTerms(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
-             const double* y, const double* z, std::size_t n, const FootQuery& query)
+             const double* y, const double* z, std::size_t n, const FootQuery& query,
+             bool deepestTried)
         : mChildren(children), mOp(op), mX(x), mY(y), mZ(z), mQuery(query),
+          mDeepestTried(deepestTried),
           mN(n), mValues(new double[children.size() * n]), mFeet(children.size()),
           mWhole(children.size()), mParts(children.size())
     {
@@ -807,6 +811,7 @@ private:
     Csg::Op mOp;
     const double *mX, *mY, *mZ;
     const FootQuery& mQuery;
+    bool mDeepestTried;
     /// Child @a c's values (a row of the batch).
     double* value(std::size_t c) const { return mValues.get() + c * mN; }
 
@@ -873,7 +878,7 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     // The deepest term's foot point, where it lies outside every other term, is the nearest
     // point: it is -u away, and every point of the union's surface is at least as far (it lies
     // outside the deepest term, whose surface is -u away).
-    if (foot(deepest, i, nearest) && outsideOthers(p, nearest, {deepest})) {
+    if (!mDeepestTried && foot(deepest, i, nearest) && outsideOthers(p, nearest, {deepest})) {
         depth = std::min((p - nearest).length(), mQuery.far);
         if (depth <= -u + mQuery.tolerance) return true;
     }
@@ -1065,9 +1070,9 @@ void sphereUnionDeepestFeet(const double* __restrict s, std::size_t m, const dou
 /// point inside).
 void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
                    const double* y, const double* z, std::size_t n, const FootQuery& query,
-                   FootPoints& out)
+                   FootPoints& out, bool deepestTried = false)
 {
-    CsgTerms terms(children, op, x, y, z, n, query);
+    CsgTerms terms(children, op, x, y, z, n, query, deepestTried);
     const double rho = op == Csg::Op::Union ? 1.0 : -1.0;
     // The deciding term (by distance) u, its index and the next, second; whether all are
     // certified. Exact children without foot points asked: the least two in vectorized passes.
@@ -1191,7 +1196,8 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
         if (m == 0) return;
     }
     FootPoints sub;
-    csgFootPoints(mChildren, mOp, sx, sy, sz, m, query, sub);
+    csgFootPoints(mChildren, mOp, sx, sy, sz, m, query, sub,
+                  mOp == Op::Union && !mSpheres.empty());
     for (std::size_t k = 0; k < m; ++k) {
         const std::size_t i = idx[k];
         out.distance[i] = sub.distance[k];

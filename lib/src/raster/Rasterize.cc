@@ -95,7 +95,7 @@ struct Context
     }
 
     /// Can the box hold a voxel of the result? Exact: a band voxel has |f| < band, and so has
-    /// one of a CSG of exact distances (|f| <= its distance); otherwise a band voxel has the
+    /// one of a 1-Lipschitz shape (|f| <= its distance: boundedByDistance); otherwise a band voxel has the
     /// surface within the band: a sign change within `reach` of the box.
     Verdict classify(const Implicit& f, const CoordBBox& b) const
     {
@@ -150,7 +150,7 @@ void leafPoints(const Coord& origin, double dx, double* x, double* y, double* z)
 
 /// The values of a leaf for a shape that is not an exact SDF: true distances for the voxels
 /// that can be in the band, +/- the band (by sign) for the others. Which voxels can be: for a
-/// CSG of exact distances (|f| <= the distance), those with |f| < band; otherwise those in the
+/// 1-Lipschitz shape (|f| <= the distance), those with |f| < band; otherwise those in the
 /// leaf's 2^3 groups of voxels whose box, grown by the band, holds a sign change of the shape's
 /// interval (then only those voxels are evaluated at all).
 void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, const double* x,
