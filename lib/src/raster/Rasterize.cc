@@ -171,26 +171,31 @@ void leafPoints(const Coord& origin, double dx, double* x, double* y, double* z)
 /// that can be in the band, +/- the band (by sign) for the others. Which voxels can be: for a
 /// 1-Lipschitz shape (|f| <= the distance), those with |f| < band; otherwise those in the
 /// leaf's 2^3 groups of voxels whose box, grown by the band, holds a sign change of the shape's
-/// interval (then only those voxels are evaluated at all).
-void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, const double* x,
-                   const double* y, const double* z, double* v, Counts* counts)
+/// interval (then only those voxels are evaluated at all, and no other voxel's coordinates are
+/// made). Returns false if no voxel can be (the leaf has no band voxel), with @a allInside
+/// telling whether every voxel is inside.
+bool leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, double* v,
+                   Counts* counts, bool& allInside)
 {
     alignas(64) double sx[512], sy[512], sz[512], sv[512], d[512];
     int index[512];
     int m = 0;
-    auto take = [&](int n) {
-        sx[m] = x[n];
-        sy[m] = y[n];
-        sz[m] = z[n];
-        index[m++] = n;
-    };
-    bool inside = false;
+    bool inside = false, outside = false;
     if (ctx.boundedByDistance) {
+        alignas(64) double x[512], y[512], z[512];
+        leafPoints(origin, ctx.dx, x, y, z);
         f.values(x, y, z, v, 512);
         for (int n = 0; n < 512; ++n) {
             inside = inside || v[n] < 0.0;
-            if (std::abs(v[n]) < ctx.band) take(n);
-            else v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
+            if (std::abs(v[n]) < ctx.band) {
+                sx[m] = x[n];
+                sy[m] = y[n];
+                sz[m] = z[n];
+                index[m++] = n;
+            } else {
+                v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
+                outside = outside || v[n] > 0.0;
+            }
         }
         for (int k = 0; k < m; ++k) sv[k] = v[index[k]];
     } else {
@@ -209,9 +214,19 @@ void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, c
             for (int j = b; j < b + 2; ++j)
             for (int k = c; k < c + 2; ++k) {
                 const int n = (i << 6) | (j << 3) | k;
-                if (lo[g] > 0.0) v[n] = ctx.band; // no surface within the band
-                else if (hi[g] < 0.0) v[n] = -ctx.band, inside = true;
-                else take(n);
+                if (lo[g] > 0.0) {
+                    v[n] = ctx.band; // no surface within the band
+                    outside = true;
+                } else if (hi[g] < 0.0) {
+                    v[n] = -ctx.band;
+                    inside = true;
+                } else {
+                    // leafPoints()' coordinates, for this voxel alone.
+                    sx[m] = double(origin.x() + i) * ctx.dx;
+                    sy[m] = double(origin.y() + j) * ctx.dx;
+                    sz[m] = double(origin.z() + k) * ctx.dx;
+                    index[m++] = n;
+                }
             }
         }
     }
@@ -227,9 +242,13 @@ void leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, c
         for (int k = 0; k < m; ++k) inside = inside || sv[k] < 0.0;
     }
     if (counts && inside && !counts->anyInside) counts->anyInside = true;
-    if (m == 0) return;
+    if (m == 0) {
+        allInside = !outside;
+        return false;
+    }
     if (counts) counts->add(dc);
     for (int k = 0; k < m; ++k) v[index[k]] = d[k];
+    return true;
 }
 
 /// What storeLeafValues() found, as bits.
@@ -273,10 +292,14 @@ inline std::uint64_t packBits(const std::uint8_t* bytes)
 LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, bool& inside,
                  Counts* counts)
 {
-    alignas(64) double x[512], y[512], z[512], v[512];
-    leafPoints(origin, ctx.dx, x, y, z);
-    if (ctx.exact) f.values(x, y, z, v, 512);
-    else leafDistances(ctx, f, origin, x, y, z, v, counts);
+    alignas(64) double v[512];
+    if (ctx.exact) {
+        alignas(64) double x[512], y[512], z[512];
+        leafPoints(origin, ctx.dx, x, y, z);
+        f.values(x, y, z, v, 512);
+    } else if (!leafDistances(ctx, f, origin, v, counts, inside)) {
+        return nullptr; // every voxel beyond the band: no leaf
+    }
     const float bg = static_cast<float>(ctx.band);
     // The buffer left unfilled: every value is written below.
     auto leaf = std::make_unique<LeafT>(openvdb::PartialCreate(), origin, bg);
