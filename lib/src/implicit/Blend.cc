@@ -47,9 +47,12 @@ IVDB_CLONE_INLINE void superEllipticPoints(CsgOp op, double p, const double* ter
         const double* t1 = terms + n;
         double x[MaxPoints];
         for (std::size_t i = 0; i < n; ++i) {
-            const bool firstLeads = s < 0.0 ? terms[i] <= t1[i] : terms[i] >= t1[i];
-            e[i] = firstLeads ? terms[i] : t1[i];
-            const double other = firstLeads ? t1[i] : terms[i];
+            // Both terms loaded, then selected (a select of the two loads was compiled to a
+            // gather from the chosen addresses, a sixth of this loop's time).
+            const double a = terms[i], b = t1[i];
+            const bool firstLeads = s < 0.0 ? a <= b : a >= b;
+            e[i] = firstLeads ? a : b;
+            const double other = firstLeads ? b : a;
             x[i] = detail::expNonPositive(s * p * (other - e[i]));
             sum[i] = 1.0 + x[i];
         }

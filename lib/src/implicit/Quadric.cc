@@ -277,6 +277,7 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         p1[m] = p1[i];
         p2[m] = p2[i];
         mu[m] = mu[i];
+        e[m] = e[i]; // compacted too: read as e[idx[k]] it was a gather, a tenth of the time
         m += near[i] ? 1 : 0;
     }
     for (int round = 0; round < 3; ++round) {
@@ -299,7 +300,7 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
     const double agreement = q.d0 > 0.0 && q.d1 > 0.0 && q.d2 > 0.0
                                  ? std::numeric_limits<double>::infinity() : 0.25;
     for (std::size_t k = 0; k < m; ++k) {
-        good[k] = q.foot(p0[k], p1[k], p2[k], mu[k], std::abs(e[idx[k]]), query.tolerance,
+        good[k] = q.foot(p0[k], p1[k], p2[k], mu[k], std::abs(e[k]), query.tolerance,
                          agreement, q0[k], q1[k], q2[k], dist[k]) ? 1.0 : 0.0;
     }
     for (std::size_t k = 0; k < m; ++k) {
