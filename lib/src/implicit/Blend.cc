@@ -115,9 +115,12 @@ void superEllipticBatch(CsgOp op, double p, const double* terms, std::size_t m, 
 
 /// The gradients sum_c (+/-) w_c grad f_c over a batch: @a cg holds each child's gradients
 /// (3 rows of n per child), @a w the weights; the children a difference subtracts count negated.
-/// Gradient()'s sums, in its order.
-void weightedGradients(bool difference, const double* cg, const double* w, std::size_t m,
-                       std::size_t n, double* gx, double* gy, double* gz)
+/// Gradient()'s sums, in its order (the same bits from every vector width: no fused
+/// multiply-adds, lib/src/util/Simd.h).
+IVDB_VECTOR_CLONES
+void weightedGradients(bool difference, const double* __restrict cg, const double* __restrict w,
+                       std::size_t m, std::size_t n, double* __restrict gx,
+                       double* __restrict gy, double* __restrict gz)
 {
     for (std::size_t i = 0; i < n; ++i) gx[i] = gy[i] = gz[i] = 0.0;
     for (std::size_t c = 0; c < m; ++c) {
