@@ -167,6 +167,17 @@ void leafPoints(const Coord& origin, double dx, double* x, double* y, double* z)
     }
 }
 
+/// The centres of the leaf's 64 groups of 2^3 voxels (group g at voxel offsets 2 (g >> 4),
+/// 2 ((g >> 2) & 3), 2 (g & 3)), in world coordinates.
+void groupCentres(const Coord& origin, double dx, double* cx, double* cy, double* cz)
+{
+    for (int g = 0; g < 64; ++g) {
+        cx[g] = (double(origin.x() + 2 * (g >> 4)) + 0.5) * dx;
+        cy[g] = (double(origin.y() + 2 * ((g >> 2) & 3)) + 0.5) * dx;
+        cz[g] = (double(origin.z() + 2 * (g & 3)) + 0.5) * dx;
+    }
+}
+
 /// The values of a leaf for a shape that is not an exact SDF: true distances for the voxels
 /// that can be in the band, +/- the band (by sign) for the others. Which voxels can be: for a
 /// 1-Lipschitz shape (|f| <= the distance), those with |f| < band; otherwise those in the
@@ -182,31 +193,58 @@ bool leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, d
     int m = 0;
     bool inside = false, outside = false;
     if (ctx.boundedByDistance) {
-        alignas(64) double x[512], y[512], z[512];
-        leafPoints(origin, ctx.dx, x, y, z);
-        f.values(x, y, z, v, 512);
-        for (int n = 0; n < 512; ++n) {
-            inside = inside || v[n] < 0.0;
-            if (std::abs(v[n]) < ctx.band) {
-                sx[m] = x[n];
-                sy[m] = y[n];
-                sz[m] = z[n];
+        // First the value at the centre of each 2^3 group of voxels: |f| never changes faster
+        // than the distance, so where it exceeds the band by the half diagonal (sqrt(3)/2
+        // voxels) every voxel of the group is beyond the band, on the centre's side, and is not
+        // evaluated. Then the other groups' voxels, in one call.
+        double cx[64], cy[64], cz[64], cv[64];
+        groupCentres(origin, ctx.dx, cx, cy, cz);
+        f.values(cx, cy, cz, cv, 64);
+        const double clear = ctx.band + (0.5 * std::sqrt(3.0) + 1e-6) * ctx.dx;
+        alignas(64) double x[512], y[512], z[512], u[512];
+        int at[512], count = 0;
+        for (int g = 0; g < 64; ++g) {
+            const int a = 2 * (g >> 4), b = 2 * ((g >> 2) & 3), c = 2 * (g & 3);
+            const bool skip = std::abs(cv[g]) > clear;
+            const double side = cv[g] > 0.0 ? ctx.band : -ctx.band;
+            for (int i = a; i < a + 2; ++i)
+            for (int j = b; j < b + 2; ++j)
+            for (int k = c; k < c + 2; ++k) {
+                const int n = (i << 6) | (j << 3) | k;
+                if (skip) {
+                    v[n] = side;
+                    continue;
+                }
+                // leafPoints()' coordinates, for this voxel alone.
+                x[count] = double(origin.x() + i) * ctx.dx;
+                y[count] = double(origin.y() + j) * ctx.dx;
+                z[count] = double(origin.z() + k) * ctx.dx;
+                at[count++] = n;
+            }
+            inside = inside || (skip && cv[g] < 0.0);
+            outside = outside || (skip && cv[g] > 0.0);
+        }
+        if (count > 0) f.values(x, y, z, u, std::size_t(count));
+        for (int t = 0; t < count; ++t) {
+            const int n = at[t];
+            inside = inside || u[t] < 0.0;
+            if (std::abs(u[t]) < ctx.band) {
+                sx[m] = x[t];
+                sy[m] = y[t];
+                sz[m] = z[t];
+                sv[m] = u[t];
                 index[m++] = n;
+                v[n] = u[t];
             } else {
-                v[n] = v[n] > 0.0 ? ctx.band : -ctx.band;
+                v[n] = u[t] > 0.0 ? ctx.band : -ctx.band;
                 outside = outside || v[n] > 0.0;
             }
         }
-        for (int k = 0; k < m; ++k) sv[k] = v[index[k]];
     } else {
         // The 64 groups' boxes (voxel centres), grown by the band, in one call.
         const double grow = ctx.band + 1e-9 * ctx.dx;
         double cx[64], cy[64], cz[64], lo[64], hi[64];
-        for (int g = 0; g < 64; ++g) {
-            cx[g] = (double(origin.x() + 2 * (g >> 4)) + 0.5) * ctx.dx;
-            cy[g] = (double(origin.y() + 2 * ((g >> 2) & 3)) + 0.5) * ctx.dx;
-            cz[g] = (double(origin.z() + 2 * (g & 3)) + 0.5) * ctx.dx;
-        }
+        groupCentres(origin, ctx.dx, cx, cy, cz);
         f.intervals(cx, cy, cz, Vec3d(0.5 * ctx.dx + grow), 64, lo, hi);
         for (int g = 0; g < 64; ++g) {
             const int a = 2 * (g >> 4), b = 2 * ((g >> 2) & 3), c = 2 * (g & 3);
