@@ -178,6 +178,46 @@ void groupCentres(const Coord& origin, double dx, double* cx, double* cy, double
     }
 }
 
+/// The values of a leaf of a shape whose |f| never exceeds the distance (an exact SDF or a
+/// 1-Lipschitz shape), first at the centre of each 2^3 group of voxels: |f| never changes faster
+/// than the distance, so where it exceeds the band by the half diagonal (sqrt(3)/2 voxels) every
+/// voxel of the group is beyond the band, on the centre's side: +/- the band into @a v, and
+/// @a inside or @a outside set. The other groups' voxels are evaluated in one call: their
+/// coordinates (@a x, @a y, @a z), values (@a u) and offsets (@a at), as many as returned.
+int boundedLeafValues(const Context& ctx, const Implicit& f, const Coord& origin, double* v,
+                      double* x, double* y, double* z, double* u, int* at, bool& inside,
+                      bool& outside)
+{
+    double cx[64], cy[64], cz[64], cv[64];
+    groupCentres(origin, ctx.dx, cx, cy, cz);
+    f.values(cx, cy, cz, cv, 64);
+    const double clear = ctx.band + (0.5 * std::sqrt(3.0) + 1e-6) * ctx.dx;
+    int count = 0;
+    for (int g = 0; g < 64; ++g) {
+        const int a = 2 * (g >> 4), b = 2 * ((g >> 2) & 3), c = 2 * (g & 3);
+        const bool skip = std::abs(cv[g]) > clear;
+        const double side = cv[g] > 0.0 ? ctx.band : -ctx.band;
+        for (int i = a; i < a + 2; ++i)
+        for (int j = b; j < b + 2; ++j)
+        for (int k = c; k < c + 2; ++k) {
+            const int n = (i << 6) | (j << 3) | k;
+            if (skip) {
+                v[n] = side;
+                continue;
+            }
+            // leafPoints()' coordinates, for this voxel alone.
+            x[count] = double(origin.x() + i) * ctx.dx;
+            y[count] = double(origin.y() + j) * ctx.dx;
+            z[count] = double(origin.z() + k) * ctx.dx;
+            at[count++] = n;
+        }
+        inside = inside || (skip && cv[g] < 0.0);
+        outside = outside || (skip && cv[g] > 0.0);
+    }
+    if (count > 0) f.values(x, y, z, u, std::size_t(count));
+    return count;
+}
+
 /// The values of a leaf for a shape that is not an exact SDF: true distances for the voxels
 /// that can be in the band, +/- the band (by sign) for the others. Which voxels can be: for a
 /// 1-Lipschitz shape (|f| <= the distance), those with |f| < band; otherwise those in the
@@ -193,38 +233,9 @@ bool leafDistances(const Context& ctx, const Implicit& f, const Coord& origin, d
     int m = 0;
     bool inside = false, outside = false;
     if (ctx.boundedByDistance) {
-        // First the value at the centre of each 2^3 group of voxels: |f| never changes faster
-        // than the distance, so where it exceeds the band by the half diagonal (sqrt(3)/2
-        // voxels) every voxel of the group is beyond the band, on the centre's side, and is not
-        // evaluated. Then the other groups' voxels, in one call.
-        double cx[64], cy[64], cz[64], cv[64];
-        groupCentres(origin, ctx.dx, cx, cy, cz);
-        f.values(cx, cy, cz, cv, 64);
-        const double clear = ctx.band + (0.5 * std::sqrt(3.0) + 1e-6) * ctx.dx;
         alignas(64) double x[512], y[512], z[512], u[512];
-        int at[512], count = 0;
-        for (int g = 0; g < 64; ++g) {
-            const int a = 2 * (g >> 4), b = 2 * ((g >> 2) & 3), c = 2 * (g & 3);
-            const bool skip = std::abs(cv[g]) > clear;
-            const double side = cv[g] > 0.0 ? ctx.band : -ctx.band;
-            for (int i = a; i < a + 2; ++i)
-            for (int j = b; j < b + 2; ++j)
-            for (int k = c; k < c + 2; ++k) {
-                const int n = (i << 6) | (j << 3) | k;
-                if (skip) {
-                    v[n] = side;
-                    continue;
-                }
-                // leafPoints()' coordinates, for this voxel alone.
-                x[count] = double(origin.x() + i) * ctx.dx;
-                y[count] = double(origin.y() + j) * ctx.dx;
-                z[count] = double(origin.z() + k) * ctx.dx;
-                at[count++] = n;
-            }
-            inside = inside || (skip && cv[g] < 0.0);
-            outside = outside || (skip && cv[g] > 0.0);
-        }
-        if (count > 0) f.values(x, y, z, u, std::size_t(count));
+        int at[512];
+        const int count = boundedLeafValues(ctx, f, origin, v, x, y, z, u, at, inside, outside);
         for (int t = 0; t < count; ++t) {
             const int n = at[t];
             inside = inside || u[t] < 0.0;
@@ -332,6 +343,8 @@ LeafT* buildLeaf(const Context& ctx, const Implicit& f, const Coord& origin, boo
 {
     alignas(64) double v[512];
     if (ctx.exact) {
+        // Every voxel: an exact SDF's values cost less than boundedLeafValues()' selection (the
+        // sphere of radius 1 at voxel 0.0025 took 0.046 s with it, 0.035 s without).
         alignas(64) double x[512], y[512], z[512];
         leafPoints(origin, ctx.dx, x, y, z);
         f.values(x, y, z, v, 512);
