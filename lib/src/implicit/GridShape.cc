@@ -11,6 +11,9 @@ namespace ivdb::implicit {
 
 namespace {
 
+/// Added to a double of magnitude below 2^51 and taken away again, rounds it to an integer.
+constexpr double kRound = 6755399441055744.0; // 1.5 * 2^52
+
 // Unregistered: a registered accessor would lock the tree's registry on every call.
 using Accessor = openvdb::tree::ValueAccessor<const openvdb::FloatTree, /*IsSafe=*/false>;
 
@@ -39,12 +42,15 @@ double tricubic(const Accessor& acc, const Vec3d& q, Vec3d* grad)
     int c[3];
     bool onLattice = true;
     for (int a = 0; a < 3; ++a) {
-        const double r = std::round(q[a]);
+        // The nearest integer by adding and taking away 1.5 * 2^52 (callers keep |q| far below
+        // 2^51: GridShape::far()), and the floor from it: std::round and std::floor are calls
+        // on x86-64's baseline.
+        const double r = (q[a] + kRound) - kRound;
         if (std::abs(q[a] - r) < 1e-9) {
             c[a] = int(r);
             f[a] = 0.0;
         } else {
-            const double fl = std::floor(q[a]);
+            const double fl = r > q[a] ? r - 1.0 : r;
             c[a] = int(fl);
             f[a] = q[a] - fl;
             onLattice = false;
@@ -52,6 +58,23 @@ double tricubic(const Accessor& acc, const Vec3d& q, Vec3d* grad)
     }
     const openvdb::Coord base{c[0], c[1], c[2]};
     if (onLattice && !grad) return acc.getValue(base);
+    // The 4^3 samples, a row along z at a time: from the leaf's buffer, where the row lies in
+    // one leaf (z is the buffer's fastest axis), else voxel by voxel (a tile or the background
+    // holds it, or it crosses leaves).
+    float samples[4][4][4];
+    for (int i = 0; i < 4; ++i) {
+        for (int j = 0; j < 4; ++j) {
+            const openvdb::Coord row = base.offsetBy(i - 1, j - 1, -1);
+            const openvdb::FloatTree::LeafNodeType* leaf =
+                (row.z() & 7) <= 4 ? acc.probeConstLeaf(row) : nullptr;
+            if (leaf) {
+                const float* from = leaf->buffer().data() + leaf->coordToOffset(row);
+                for (int k = 0; k < 4; ++k) samples[i][j][k] = from[k];
+            } else {
+                for (int k = 0; k < 4; ++k) samples[i][j][k] = acc.getValue(row.offsetBy(0, 0, k));
+            }
+        }
+    }
     double w[3][4], dw[3][4];
     for (int a = 0; a < 3; ++a) catmullRom(f[a], w[a], dw[a]);
     double value = 0.0;
@@ -62,7 +85,7 @@ double tricubic(const Accessor& acc, const Vec3d& q, Vec3d* grad)
             if (wxy == 0.0 && dxy == 0.0 && xdy == 0.0) continue;
             for (int k = 0; k < 4; ++k) {
                 if (w[2][k] == 0.0 && dw[2][k] == 0.0) continue;
-                const double v = acc.getValue(base.offsetBy(i - 1, j - 1, k - 1));
+                const double v = samples[i][j][k];
                 value += wxy * w[2][k] * v;
                 g += Vec3d(dxy * w[2][k], xdy * w[2][k], wxy * dw[2][k]) * v;
             }
@@ -147,6 +170,21 @@ void GridShape::values(const double* x, const double* y, const double* z, double
     }
 }
 
+void GridShape::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
+                                   double* gx, double* gy, double* gz, std::size_t n) const
+{
+    // values() and gradients() from one interpolation a point (the same sums: the same bits).
+    const Accessor acc(mGrid->tree());
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d q = Vec3d(x[i], y[i], z[i]) * mInvDx;
+        Vec3d g(0.0);
+        out[i] = far(q) ? mBackground : clamp(tricubic(acc, q, &g));
+        gx[i] = g[0] * mInvDx;
+        gy[i] = g[1] * mInvDx;
+        gz[i] = g[2] * mInvDx;
+    }
+}
+
 void GridShape::gradients(const double* x, const double* y, const double* z, double* gx,
                           double* gy, double* gz, std::size_t n) const
 {
@@ -170,12 +208,25 @@ void GridShape::sampleRange(const openvdb::Coord& lo, const openvdb::Coord& hi, 
     openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> minAcc(mLeafMin), maxAcc(mLeafMax);
     const openvdb::Coord ext = hi - lo;
     if (ext.x() <= 20 && ext.y() <= 20 && ext.z() <= 20) { // a leaf's box or so: every voxel
+        // A row along z at a time, in runs within one leaf: from its buffer (z is its fastest
+        // axis), or one value where a tile or the background holds the run.
         for (int x = lo.x(); x <= hi.x(); ++x) {
             for (int y = lo.y(); y <= hi.y(); ++y) {
-                for (int z = lo.z(); z <= hi.z(); ++z) {
-                    const double v = acc.getValue(openvdb::Coord(x, y, z));
-                    min = std::min(min, v);
-                    max = std::max(max, v);
+                for (int z = lo.z(); z <= hi.z();) {
+                    const openvdb::Coord at(x, y, z);
+                    const int end = std::min(hi.z(), z | 7); // the run's last z in this leaf
+                    if (const auto* leaf = acc.probeConstLeaf(at)) {
+                        const float* v = leaf->buffer().data() + leaf->coordToOffset(at);
+                        for (int k = 0; k <= end - z; ++k) {
+                            min = std::min(min, double(v[k]));
+                            max = std::max(max, double(v[k]));
+                        }
+                    } else {
+                        const double v = acc.getValue(at);
+                        min = std::min(min, v);
+                        max = std::max(max, v);
+                    }
+                    z = end + 1;
                 }
             }
         }

@@ -35,6 +35,8 @@ public:
                 std::size_t n) const override;
     void gradients(const double* x, const double* y, const double* z, double* gx, double* gy,
                    double* gz, std::size_t n) const override;
+    void valuesAndGradients(const double* x, const double* y, const double* z, double* out,
+                            double* gx, double* gy, double* gz, std::size_t n) const override;
     Interval interval(const BBoxd& box) const override;
     /// The band's active voxels' box, one voxel wider (a closed surface's inside is within it).
     BBoxd boundingBox() const override;
