@@ -367,15 +367,17 @@ TEST_F(TestTrueDistances, NonUniformScaleOfABoxIsTheScaledBox)
 {
     // The scale acts along the box's own axes: rotated, translated and scaled, a box is the box
     // with scaled sides, moved rigidly. Its distances against that box's closed form in its own
-    // frame, every voxel local (before, the smooth iteration failed near its edges and the
-    // lattice search took them).
+    // frame. Alone, the rasterizer takes that box for it (Implicit::sameSurface()), an exact
+    // SDF: no voxel is solved. In a union with a sphere apart from it, the union's foot points
+    // take the scaled box's from that box: every voxel local (before, the smooth iteration
+    // failed near its edges and the lattice search took them).
     const double dx = 0.01;
     const Vec3d scale(1.5, 0.7, 1.1), centre(0.03, -0.05, 0.02), size(0.5, 0.6, 0.4);
     const auto shape = std::make_shared<implicit::Transform>(std::make_shared<implicit::Box>(centre, size),
                                                              Vec3d(0.05, 0.1, -0.02),
                                                              Vec3d(-25.0, 40.0, 15.0), scale);
     const Vec3d half(0.5 * size[0] * scale[0], 0.5 * size[1] * scale[1], 0.5 * size[2] * scale[2]);
-    auto reference = [&](const Vec3d& p) {
+    auto boxDistance = [&](const Vec3d& p) {
         const Vec3d q = shape->toLocal(p) - centre;
         double outside = 0.0, inside = -std::numeric_limits<double>::max();
         for (int i = 0; i < 3; ++i) {
@@ -385,18 +387,30 @@ TEST_F(TestTrueDistances, NonUniformScaleOfABoxIsTheScaledBox)
         }
         return std::sqrt(outside) + std::min(inside, 0.0);
     };
-    raster::RasterStats stats;
-    raster::RasterSettings s = settings(dx);
-    s.stats = &stats;
-    const auto g = raster::rasterize(shape, s);
-    const double worst = expectDistances(*g, reference, dx, 3.0, 1e-6, "scaled box",
-                                         implicit::BBoxd(Vec3d(-0.7), Vec3d(0.7)));
-    std::printf("scaled box: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n", worst,
-                (unsigned long long)stats.localDistances,
-                (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
-                (unsigned long long)stats.sweptDistances);
-    EXPECT_GT(stats.localDistances, 0u);
-    EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u);
+    ASSERT_TRUE(shape->sameSurface());
+    EXPECT_TRUE(shape->sameSurface()->isExactSdf());
+    const Vec3d ball(0.9, 0.0, 0.0);
+    const double radius = 0.1; // 0.1 or more from the box: beyond both bands
+    const auto both = std::make_shared<implicit::Csg>(implicit::CsgOp::Union, std::vector<implicit::Implicit::Ptr>{
+        shape, std::make_shared<implicit::Sphere>(ball, radius)});
+    for (const bool alone : {true, false}) {
+        raster::RasterStats stats;
+        raster::RasterSettings s = settings(dx);
+        s.stats = &stats;
+        const auto g = raster::rasterize(alone ? implicit::Implicit::Ptr(shape) : both, s);
+        const std::string what = alone ? "scaled box" : "scaled box and a sphere";
+        const double worst = expectDistances(*g, [&](const Vec3d& p) {
+            return alone ? boxDistance(p) : std::min(boxDistance(p), (p - ball).length() - radius);
+        }, dx, 3.0, 1e-6, what, implicit::BBoxd(Vec3d(-1.1), Vec3d(1.1)));
+        std::printf("%s: worst error %.2g voxel; %llu local, %llu searched, %llu swept\n",
+                    what.c_str(), worst, (unsigned long long)stats.localDistances,
+                    (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
+                    (unsigned long long)stats.sweptDistances);
+        if (alone) EXPECT_EQ(stats.localDistances, 0u) << what;
+        else EXPECT_GT(stats.localDistances, 0u) << what;
+        EXPECT_EQ(stats.searchedDistances + stats.approximateDistances + stats.sweptDistances, 0u)
+            << what;
+    }
 }
 
 /// The signed distance to a shell of thickness @a t from the child's distance @a f and the

@@ -396,6 +396,15 @@ bool Transform::isExactSdf() const
     return mChild->isExactSdf() && uniformScale() > 0.0;
 }
 
+Implicit::Ptr Transform::sameSurface() const
+{
+    // Not the CSG surfaces (of children moved, or of a cone's quadric and caps): unmeasured
+    // against the scaled field's own route.
+    if (uniformScale() > 0.0 || !mSurface) return nullptr;
+    if (mSurface->isExactSdf() || dynamic_cast<const Quadric*>(mSurface.get())) return mSurface;
+    return nullptr;
+}
+
 Implicit::Ptr Transform::prune(const BBoxd& box) const
 {
     const BBoxd local = mapBox(box, [this](const Vec3d& p) { return toLocal(p); });

@@ -958,6 +958,12 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
             "unbounded quadric or CSG result): add \"bounds\" {\"min\": [...], \"max\": [...]} "
             "to the scene to clip it to a box");
     }
+    if (s.distance == Distance::Exact) {
+        // The same surface and sign where another shape finds its distances more directly (a
+        // scaled sphere's world quadric, a scaled box's moved box): the grid holds distances,
+        // the same either way.
+        if (Implicit::Ptr same = ctx.shape->sameSurface()) ctx.shape = same;
+    }
     ctx.dx = s.voxelSize;
     ctx.band = s.halfWidth * s.voxelSize;
     ctx.exact = ctx.shape->isExactSdf();

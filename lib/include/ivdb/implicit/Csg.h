@@ -107,6 +107,9 @@ public:
     /// Of a 1-Lipschitz child, at any scale (the point moves by at most 1 / min(scale) in the
     /// child's space per unit in the world's).
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
+    /// The surface footPoints() answers for a non-uniform scale, where that is a world quadric
+    /// or an exact SDF (a box moved rigidly).
+    Ptr sameSurface() const override;
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "transform"; }
 

@@ -115,6 +115,11 @@ public:
     /// transforms, a non-uniform scale's value being min(scale) times its child's). Where this
     /// holds, a point with |value()| >= d is at least d from the surface.
     virtual bool isDistanceBound() const { return isExactSdf(); }
+    /// @brief A shape with this one's surface and sign whose true distances are found more
+    /// directly (a non-uniformly scaled sphere's or quadric's world quadric, a scaled box's box
+    /// moved rigidly), or null. Its values differ (a distance, or another field): the rasterizer
+    /// takes it where it stores distances, not where it stores this shape's own values.
+    virtual Ptr sameSurface() const { return nullptr; }
     /// @brief A node equal to this one at every point of @a box, possibly simpler
     /// (a union drops children that cannot be the minimum there).
     virtual Ptr prune(const BBoxd& box) const;
