@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 // Rasterizer tests: against OpenVDB's createLevelSetSphere, closed-form quadric surfaces, and the
 // dense path (sparse must equal dense for the data scenes and for random CSG trees).
+#include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 #include <ivdb/implicit/Quadric.h>
@@ -18,7 +19,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <random>
+#include <tuple>
 
 using namespace ivdb;
 using implicit::Implicit;
@@ -455,8 +458,8 @@ TEST_F(TestRasterize, ExtremeHalfWidths)
 }
 
 // "distance": "bound": a union of spheres stores min of the exact distances as it is, which is
-// what OpenVDB's createLevelSetSphere + csgUnion give; sparse equals dense; anything that is not
-// a CSG of exact distances is refused.
+// what OpenVDB's createLevelSetSphere + csgUnion give; sparse equals dense; a shape whose value
+// can exceed its distance (a quadric) is refused.
 TEST_F(TestRasterize, DistanceBoundStoresCsgOfDistances)
 {
     const double dx = 1.0 / 64.0;
@@ -520,5 +523,64 @@ TEST_F(TestRasterize, DistanceBoundStoresCsgOfDistances)
         FAIL() << "a quadric with distance bound must be refused";
     } catch (const openvdb::ValueError& e) {
         EXPECT_NE(std::string(e.what()).find("remove \"distance\""), std::string::npos) << e.what();
+    }
+}
+
+// "distance": "bound" for every shape whose value never exceeds its distance, not CSG alone: a
+// blend of two spheres and a sphere scaled non-uniformly store their own values (closed forms),
+// every voxel of the true band (the default mode's grid) is active with a value of its sign and
+// no larger magnitude, and sparse equals dense.
+TEST_F(TestRasterize, DistanceBoundStoresEveryDistanceBound)
+{
+    const double dx = 1.0 / 64.0, p = 20.0, r = 0.7;
+    const Vec3d ca(-0.3, 0.0, 0.0), cb(0.3, 0.05, 0.0), squash(1.0, 0.8, 0.6);
+    const double ra = 0.5, rb = 0.45;
+    const auto blend = std::make_shared<implicit::Blend>(implicit::Csg::Op::Union, p,
+        std::vector<Implicit::Ptr>{std::make_shared<implicit::Sphere>(ca, ra),
+                                   std::make_shared<implicit::Sphere>(cb, rb)});
+    const auto scaled = std::make_shared<implicit::Transform>(
+        std::make_shared<implicit::Sphere>(Vec3d(0.0), r), Vec3d(0.0), Vec3d(0.0), squash);
+    const std::vector<std::tuple<std::string, Implicit::Ptr, std::function<double(const Vec3d&)>>> cases = {
+        {"blend", blend, [&](const Vec3d& x) {
+             // -ln(e^(-p a) + e^(-p b)) / p, from the lesser term.
+             const double a = (x - ca).length() - ra, b = (x - cb).length() - rb;
+             return std::min(a, b) - std::log1p(std::exp(-p * std::abs(a - b))) / p;
+         }},
+        {"scaled sphere", scaled, [&](const Vec3d& x) {
+             // min(scale) times the sphere's distance at the point scaled back.
+             const Vec3d q(x[0] / squash[0], x[1] / squash[1], x[2] / squash[2]);
+             return squash[2] * (q.length() - r);
+         }}};
+    for (const auto& [name, shape, closedForm] : cases) {
+        raster::RasterSettings s = settings(dx);
+        s.distance = raster::Distance::Bound;
+        const auto bound = raster::rasterize(shape, s);
+        size_t checked = 0;
+        for (auto it = bound->cbeginValueOn(); it; ++it) {
+            ASSERT_NEAR(*it, closedForm(bound->indexToWorld(it.getCoord())), 1e-6) << name;
+            ++checked;
+        }
+        EXPECT_GT(checked, 10000u) << name;
+        s.distance = raster::Distance::Exact;
+        const auto exact = raster::rasterize(shape, s);
+        auto acc = bound->getConstAccessor();
+        size_t missing = 0, larger = 0;
+        for (auto it = exact->cbeginValueOn(); it; ++it) {
+            float v;
+            if (!acc.probeValue(it.getCoord(), v)) {
+                ++missing;
+                continue;
+            }
+            // Within the default mode's tolerance (1e-3 voxel): where one sphere leads, it takes
+            // that sphere's distance, which the blend's swell (e^(-p |a - b|) / p) moves by less.
+            if (!(v * *it >= 0.0f && std::abs(v) <= std::abs(*it) + 1e-3 * dx)) ++larger;
+        }
+        EXPECT_EQ(missing, 0u) << name << ": true band voxels left inactive";
+        EXPECT_EQ(larger, 0u) << name << ": bound values beyond the distance";
+        // Not the distance: the blend's swell and the scale's min(scale) show.
+        EXPECT_GT(bound->activeVoxelCount(), exact->activeVoxelCount()) << name;
+        s.distance = raster::Distance::Bound;
+        s.sampling = raster::Sampling::Dense;
+        expectSameBand(*bound, *raster::rasterize(shape, s), 0.0f, name + " bound: sparse vs dense");
     }
 }

@@ -201,8 +201,10 @@ void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& d
             "in [1, 1000]", &param::kHalfWidth);
     cmd.add("--distance", distance,
             "exact: true signed distances (shapes that are not distances are re-distanced); "
-            "bound: a CSG of exact distances stored as min / max, as OpenVDB's csg tools give "
-            "it, without re-distancing (overrides the scene's \"distance\", default exact)",
+            "bound: the shape's own value stored where it never exceeds the distance (a CSG of "
+            "exact distances as min / max, as OpenVDB's csg tools give it; blends, offsets, "
+            "shells, scales), without re-distancing (overrides the scene's \"distance\", "
+            "default exact)",
             &param::kDistance)
         ->check(CLI::IsMember({"exact", "bound"}));
 }

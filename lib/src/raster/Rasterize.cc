@@ -40,22 +40,6 @@ namespace ivdb::raster {
 
 namespace {
 
-/// A CSG tree whose leaves are exact distances: its value is min / max of distances.
-bool isCsgOfDistances(const implicit::Implicit& f)
-{
-    if (f.isExactSdf()) return true;
-    const auto* c = dynamic_cast<const implicit::Csg*>(&f);
-    if (!c) return false;
-    for (const auto& child : c->children()) {
-        if (!isCsgOfDistances(*child)) return false;
-    }
-    return true;
-}
-
-} // namespace
-
-namespace {
-
 using implicit::BBoxd;
 using implicit::Implicit;
 using implicit::Interval;
@@ -968,12 +952,13 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
     ctx.band = s.halfWidth * s.voxelSize;
     ctx.exact = ctx.shape->isExactSdf();
     if (s.distance == Distance::Bound && !ctx.exact) {
-        if (!isCsgOfDistances(*ctx.shape)) {
+        if (!ctx.shape->isDistanceBound()) {
             OPENVDB_THROW(openvdb::ValueError,
-                "\"distance\": \"bound\" needs a union, intersection or difference of exact "
-                "distances (spheres, boxes, tori and their rigid or uniformly scaled transforms); "
-                "this shape has a quadric, a blend or a non-uniform scale: remove \"distance\" "
-                "to re-distance it");
+                "\"distance\": \"bound\" needs a shape whose value never exceeds its distance "
+                "(exact distances, and their CSG, blends, smooth CSG, offsets, shells and "
+                "transforms); this shape has a quadric (an ellipsoid, cylinder, cone, paraboloid, "
+                "hyperboloid or a raw quadric), whose value is not such a bound: remove "
+                "\"distance\" to re-distance it");
         }
         ctx.exact = true; // the stored value is f itself
     }
