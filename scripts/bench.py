@@ -562,6 +562,8 @@ def bench_distances(tmp, reps, quick):
         ("union of two spheres, bound", {"type": "union", "children": two}, 0.0025, "bound", True),
         ("blend of two spheres, p = 20", {"type": "blend", "op": "union", "p": 20, "children": two},
          0.0025, None, False),
+        ("blend of two spheres, p = 20, bound", {"type": "blend", "op": "union", "p": 20, "children": two},
+         0.0025, "bound", False),
         ("union of 1000 spheres", {"type": "union", "children": many}, 0.004, None, True),
         ("union of 1000 spheres, bound", {"type": "union", "children": many}, 0.004, "bound", True),
     ]
