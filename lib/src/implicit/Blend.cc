@@ -242,6 +242,13 @@ bool Blend::isDistanceBound() const
     return true;
 }
 
+double Blend::lipschitzBound() const
+{
+    double most = 1.0;
+    for (const auto& c : mChildren) most = std::max(most, c->lipschitzBound());
+    return most;
+}
+
 std::string Blend::typeName() const
 {
     return mKernel.kind == BlendKernel::Kind::SuperElliptic ? "blend" : "smooth";

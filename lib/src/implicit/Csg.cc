@@ -199,6 +199,13 @@ bool Csg::isDistanceBound() const
     return true;
 }
 
+double Csg::lipschitzBound() const
+{
+    double most = 1.0;
+    for (const auto& c : mChildren) most = std::max(most, c->lipschitzBound());
+    return most;
+}
+
 bool Csg::isExactOutside() const
 {
     if (mOp != Op::Union) return isExactSdf();

@@ -258,15 +258,21 @@ void GridShape::sampleRange(const openvdb::Coord& lo, const openvdb::Coord& hi, 
     }
 }
 
-Interval GridShape::interval(const BBoxd& box) const
+double GridShape::lipschitzBound() const
 {
     // The samples change by at most one voxel size per voxel along each axis, so each component
     // of the interpolation's gradient is at most 1.5 (Catmull-Rom's derivative) times 1.25^2
-    // (the other axes' weights, negative lobes included), its length at most sqrt(3) times
-    // that; the values are clamped to the background.
+    // (the other axes' weights, negative lobes included), its length at most sqrt(3) times that.
+    return std::sqrt(3.0) * 1.5 * 1.25 * 1.25;
+}
+
+Interval GridShape::interval(const BBoxd& box) const
+{
+    // The interpolation changes by at most lipschitzBound() per unit of length; the values are
+    // clamped to the background.
     const double v = value(box.getCenter());
     // (With a margin for the samples' float rounding.)
-    const double lipschitz = std::sqrt(3.0) * 1.5 * 1.25 * 1.25;
+    const double lipschitz = lipschitzBound();
     const double h = lipschitz * 0.5 * (box.max() - box.min()).length() * (1.0 + 1e-4) + 1e-5 * mDx;
     double lo = std::max(-mBackground, v - h), hi = std::min(mBackground, v + h);
     // Tighter for boxes of a few voxels: the interpolation reads the voxels from floor(q) - 1 to

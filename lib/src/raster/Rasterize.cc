@@ -65,6 +65,7 @@ struct Context
     double reach = 0.0;     // world distance a box is dilated by before the interval test
     detail::DistanceSettings distances; // non-exact: how true distances are found
     bool boundedByDistance = false; // non-exact: |f| <= the distance (Implicit::isDistanceBound)
+    double lipschitz = 1.0;          // there, how fast f changes (Implicit::lipschitzBound)
     CoordBBox region;       // index box that holds every voxel of the result
     openvdb::util::NullInterrupter* interrupter = nullptr;
     std::uint64_t memoryLimit = 0;
@@ -162,11 +163,11 @@ void groupCentres(const Coord& origin, double dx, double* cx, double* cy, double
     }
 }
 
-/// The values of a leaf of a shape whose |f| never exceeds the distance (an exact SDF or a
-/// 1-Lipschitz shape), first at the centre of each 2^3 group of voxels: |f| never changes faster
-/// than the distance, so where it exceeds the band by the half diagonal (sqrt(3)/2 voxels) every
-/// voxel of the group is beyond the band, on the centre's side: +/- the band into @a v, and
-/// @a inside or @a outside set. The other groups' voxels are evaluated in one call: their
+/// The values of a leaf of a shape whose |f| never exceeds the distance (Context::
+/// boundedByDistance), first at the centre of each 2^3 group of voxels: f changes by at most
+/// Context::lipschitz per unit of length (1 but for interpolated grids), so where |f| exceeds the
+/// band by that times the half diagonal (sqrt(3)/2 voxels) every voxel of the group is beyond
+/// the band, on the centre's side: +/- the band into @a v, and @a inside or @a outside set. The other groups' voxels are evaluated in one call: their
 /// coordinates (@a x, @a y, @a z), values (@a u) and offsets (@a at), as many as returned.
 int boundedLeafValues(const Context& ctx, const Implicit& f, const Coord& origin, double* v,
                       double* x, double* y, double* z, double* u, int* at, bool& inside,
@@ -175,7 +176,7 @@ int boundedLeafValues(const Context& ctx, const Implicit& f, const Coord& origin
     double cx[64], cy[64], cz[64], cv[64];
     groupCentres(origin, ctx.dx, cx, cy, cz);
     f.values(cx, cy, cz, cv, 64);
-    const double clear = ctx.band + (0.5 * std::sqrt(3.0) + 1e-6) * ctx.dx;
+    const double clear = ctx.band + (0.5 * std::sqrt(3.0) * ctx.lipschitz + 1e-6) * ctx.dx;
     int count = 0;
     for (int g = 0; g < 64; ++g) {
         const int a = 2 * (g >> 4), b = 2 * ((g >> 2) & 3), c = 2 * (g & 3);
@@ -946,7 +947,10 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         // The same surface and sign where another shape finds its distances more directly (a
         // scaled sphere's world quadric, a scaled box's moved box): the grid holds distances,
         // the same either way.
-        if (Implicit::Ptr same = ctx.shape->sameSurface()) ctx.shape = same;
+        // (Not where that shape's box is unbounded: a quadric's box test can fail for a scale
+        // of many orders of magnitude, where the transform's box is the child's mapped.)
+        const Implicit::Ptr same = ctx.shape->sameSurface();
+        if (same && same->isBounded()) ctx.shape = same;
     }
     ctx.dx = s.voxelSize;
     ctx.band = s.halfWidth * s.voxelSize;
@@ -963,6 +967,7 @@ Context makeContext(const Implicit::Ptr& shape, const RasterSettings& s)
         ctx.exact = true; // the stored value is f itself
     }
     ctx.boundedByDistance = !ctx.exact && ctx.shape->isDistanceBound();
+    ctx.lipschitz = ctx.boundedByDistance ? ctx.shape->lipschitzBound() : 1.0;
     ctx.interrupter = s.interrupter;
     ctx.memoryLimit = s.memoryLimit;
     if (ctx.exact) {

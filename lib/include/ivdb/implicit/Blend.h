@@ -112,6 +112,8 @@ public:
     /// Of 1-Lipschitz children: both kernels' gradients are convex combinations of the
     /// children's (the weights d f / d t_i are >= 0 and sum to 1).
     bool isDistanceBound() const override;
+    /// The children's largest (the gradient is a convex combination of theirs).
+    double lipschitzBound() const override;
     std::string typeName() const override;
 
     Op op() const { return mOp; }

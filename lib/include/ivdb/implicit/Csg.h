@@ -37,6 +37,8 @@ public:
     bool isExactOutside() const override;
     /// Min and max of 1-Lipschitz children are 1-Lipschitz.
     bool isDistanceBound() const override;
+    /// The children's largest (min and max change no faster than their fastest argument).
+    double lipschitzBound() const override;
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override;
 
@@ -107,6 +109,8 @@ public:
     /// Of a 1-Lipschitz child, at any scale (the point moves by at most 1 / min(scale) in the
     /// child's space per unit in the world's).
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
+    /// The child's: min(scale) times the child's rate along a move of at most 1 / min(scale).
+    double lipschitzBound() const override { return mChild->lipschitzBound(); }
     /// The surface footPoints() answers for a non-uniform scale, where that is a world quadric
     /// or an exact SDF (a box moved rigidly).
     Ptr sameSurface() const override;

@@ -42,6 +42,8 @@ public:
     BBoxd boundingBox() const override;
     /// Within the band; beyond it the value is a lower bound of the distance's magnitude.
     bool isExactSdf() const override { return true; }
+    /// The interpolation's (interval()): its values between voxels can change faster than 1.
+    double lipschitzBound() const override;
     std::string typeName() const override { return mName; }
 
     const openvdb::FloatGrid& grid() const { return *mGrid; }

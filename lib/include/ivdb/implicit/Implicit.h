@@ -115,6 +115,12 @@ public:
     /// transforms, a non-uniform scale's value being min(scale) times its child's). Where this
     /// holds, a point with |value()| >= d is at least d from the surface.
     virtual bool isDistanceBound() const { return isExactSdf(); }
+    /// @brief Where isDistanceBound(): a bound on how fast value() changes between the points
+    /// the rasterizer samples, per unit of length. 1 for exact SDFs and the nodes that keep it;
+    /// more for an interpolated grid (GridShape), whose values are distances at its voxels but
+    /// whose interpolation between them can change faster. The rasterizer skips a group of
+    /// voxels from the value at its centre only by this bound.
+    virtual double lipschitzBound() const { return 1.0; }
     /// @brief A shape with this one's surface and sign whose true distances are found more
     /// directly (a non-uniformly scaled sphere's or quadric's world quadric, a scaled box's box
     /// moved rigidly), or null. Its values differ (a distance, or another field): the rasterizer

@@ -34,6 +34,7 @@ public:
     /// Grown (d >= 0) from a shape exact outside: f - d is the distance outside.
     bool isExactOutside() const override;
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
+    double lipschitzBound() const override { return mChild->lipschitzBound(); }
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "offset"; }
 
@@ -78,6 +79,7 @@ public:
     /// For an exact SDF child: both of the shell's surfaces are offsets of the child's.
     bool isExactOutside() const override { return mChild->isExactSdf(); }
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
+    double lipschitzBound() const override { return mChild->lipschitzBound(); }
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "shell"; }
 

@@ -23,15 +23,17 @@ enum class Sampling {
 /// @brief The widest narrow band accepted, in voxels (limits::kHalfWidth).
 inline constexpr double kMaxHalfWidth = limits::kHalfWidth.hi;
 
-/// What a CSG of exact distances stores in the band.
+/// What a shape that is not an exact distance stores in the band.
 enum class Distance
 {
     /// True signed distances: shapes that are not exact distances are re-distanced.
     Exact,
-    /// CSG (union, intersection, difference) of exact distances stored as it is, min / max,
-    /// as OpenVDB's csg tools give it: exact outside a union, at most the distance inside near
-    /// a crease (and the mirror for intersections). Much faster: no re-distancing. Shapes that
-    /// are not such a CSG are refused.
+    /// The shape's own value, for a shape whose value never exceeds its distance
+    /// (Implicit::isDistanceBound): a CSG (union, intersection, difference) of exact distances
+    /// stores min / max, as OpenVDB's csg tools give it (exact outside a union, at most the
+    /// distance inside near a crease, the mirror for intersections); blends, smooth CSG,
+    /// offsets, shells and transforms of exact distances their own values. Much faster: no
+    /// distances to find. Other shapes (a quadric among them) are refused.
     Bound
 };
 

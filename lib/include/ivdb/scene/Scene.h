@@ -42,7 +42,8 @@ struct Scene
     double halfWidth = 3.0;
     /// Optional clipping box in world units (required for unbounded shapes).
     std::optional<implicit::BBoxd> bounds;
-    /// "distance": "bound": store CSG of exact distances as it is (raster::Distance::Bound).
+    /// "distance": "bound": store the shape's own value where it never exceeds the distance
+    /// (raster::Distance::Bound).
     bool distanceBound = false;
     /// The scene's JSON text, compact, for the output's metadata.
     std::string json;
