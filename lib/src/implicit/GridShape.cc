@@ -181,7 +181,9 @@ void GridShape::values(const double* x, const double* y, const double* z, double
 void GridShape::valuesAndGradients(const double* x, const double* y, const double* z, double* out,
                                    double* gx, double* gy, double* gz, std::size_t n) const
 {
-    // values() and gradients() from one interpolation a point (the same sums: the same bits).
+    // values() and gradients() from one interpolation a point: values()' sums off the lattice;
+    // on it values() reads the voxel, which these weights (0 and 1) give exactly, up to the sign
+    // of a zero.
     const Accessor acc(mGrid->tree());
     for (std::size_t i = 0; i < n; ++i) {
         const Vec3d q = Vec3d(x[i], y[i], z[i]) * mInvDx;
