@@ -414,16 +414,18 @@ void Blend::intervals(const double* cx, const double* cy, const double* cz, cons
     }
 }
 
-BBoxd Blend::boundingBox() const
+BBoxd Blend::boundingBox() const { return boundingBoxBelow(0.0); }
+
+BBoxd Blend::boundingBoxBelow(double level) const
 {
-    if (mOp != Op::Union) return Csg(mOp, mChildren).boundingBox();
-    BBoxd b = mChildren[0]->boundingBox();
-    for (const auto& c : mChildren) {
-        if (!c->isExactOutside()) return infiniteBox();
-        b.expand(c->boundingBox());
-    }
+    // A smooth max is at least the max: within the sharp operation's box.
+    if (mOp != Op::Union) return Csg(mOp, mChildren).boundingBoxBelow(level);
+    // A smooth min is at least the min less the swell: below the level only where some child
+    // is below the level plus the swell.
     const double grow = mKernel.swell(mChildren.size());
-    return BBoxd(b.min() - Vec3d(grow), b.max() + Vec3d(grow));
+    BBoxd b = mChildren[0]->boundingBoxBelow(level + grow);
+    for (const auto& c : mChildren) b.expand(c->boundingBoxBelow(level + grow));
+    return isFinite(b) ? b : infiniteBox();
 }
 
 } // namespace ivdb::implicit

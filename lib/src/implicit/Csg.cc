@@ -169,24 +169,28 @@ Interval Csg::interval(const BBoxd& box) const
     return v;
 }
 
-BBoxd Csg::boundingBox() const
+BBoxd Csg::boundingBox() const { return boundingBoxBelow(0.0); }
+
+BBoxd Csg::boundingBoxBelow(double level) const
 {
+    // min < level where some child is; max < level where every child is (a difference's
+    // subtracted terms -b only narrow it: its first child's box).
     switch (mOp) {
     case Op::Union: {
-        BBoxd b = mChildren[0]->boundingBox();
-        for (std::size_t i = 1; i < mChildren.size(); ++i) b.expand(mChildren[i]->boundingBox());
+        BBoxd b = mChildren[0]->boundingBoxBelow(level);
+        for (std::size_t i = 1; i < mChildren.size(); ++i) b.expand(mChildren[i]->boundingBoxBelow(level));
         return b;
     }
     case Op::Intersection: {
-        BBoxd b = mChildren[0]->boundingBox();
+        BBoxd b = mChildren[0]->boundingBoxBelow(level);
         for (std::size_t i = 1; i < mChildren.size(); ++i) {
-            const BBoxd c = mChildren[i]->boundingBox();
+            const BBoxd c = mChildren[i]->boundingBoxBelow(level);
             b = BBoxd(maxComponent(b.min(), c.min()), minComponent(b.max(), c.max()));
         }
         // An empty intersection keeps an empty (inverted-free) box at its min corner.
         return BBoxd(b.min(), maxComponent(b.min(), b.max()));
     }
-    case Op::Difference: return mChildren[0]->boundingBox();
+    case Op::Difference: return mChildren[0]->boundingBoxBelow(level);
     }
     return infiniteBox();
 }

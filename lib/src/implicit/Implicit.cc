@@ -11,6 +11,14 @@ BBoxd infiniteBox()
     return BBoxd(Vec3d(-inf), Vec3d(inf));
 }
 
+BBoxd Implicit::boundingBoxBelow(double level) const
+{
+    const BBoxd box = boundingBox();
+    if (level <= 0.0) return box;
+    if (!isExactOutside() || !isFinite(box)) return infiniteBox();
+    return BBoxd(box.min() - Vec3d(level), box.max() + Vec3d(level));
+}
+
 bool isFinite(const BBoxd& box)
 {
     for (int i = 0; i < 3; ++i) {

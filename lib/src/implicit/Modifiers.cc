@@ -21,8 +21,14 @@ void requireChild(const Implicit::Ptr& child, const char* what)
     if (!child) OPENVDB_THROW(openvdb::ValueError, std::string(what) + " has a null child");
 }
 
-/// @a box grown by @a d in every direction.
-BBoxd grown(const BBoxd& box, double d) { return BBoxd(box.min() - Vec3d(d), box.max() + Vec3d(d)); }
+/// The part of @a a within @a b, both holding the same points (an infinite box is all space).
+BBoxd within(const BBoxd& a, const BBoxd& b)
+{
+    if (!isFinite(a)) return b;
+    if (!isFinite(b)) return a;
+    const Vec3d lo = maxComponent(a.min(), b.min());
+    return BBoxd(lo, maxComponent(lo, minComponent(a.max(), b.max())));
+}
 
 } // namespace
 
@@ -167,16 +173,18 @@ Interval Offset::interval(const BBoxd& box) const
     return mChild->interval(box) + (-mDistance);
 }
 
-BBoxd Offset::boundingBox() const
+BBoxd Offset::boundingBox() const { return boundingBoxBelow(0.0); }
+
+BBoxd Offset::boundingBoxBelow(double level) const
 {
-    const BBoxd box = mChild->boundingBox();
-    if (mDistance <= 0.0) return box; // shrunk: inside the child
-    if (mChild->isExactOutside() && isFinite(box)) return grown(box, mDistance);
+    // f - d below the level where the child's f is below level + d (shrunk, d <= 0: within the
+    // child's box).
+    BBoxd box = mChild->boundingBoxBelow(level + mDistance);
     // Grown from a child whose value is not the distance outside (an intersection or a
     // difference) but with a solid of its own (the parts grown, a difference's cut shrunk):
-    // that solid's box, within its first part's grown.
-    if (mSolid) return mSolid->boundingBox();
-    return infiniteBox();
+    // within that solid's box too.
+    if (mSolid && level <= 0.0) box = within(box, mSolid->boundingBox());
+    return box;
 }
 
 bool Offset::isExactOutside() const { return mDistance >= 0.0 && mChild->isExactOutside(); }
@@ -244,12 +252,14 @@ Interval Shell::interval(const BBoxd& box) const
     return a + (-mHalf);
 }
 
-BBoxd Shell::boundingBox() const
+BBoxd Shell::boundingBox() const { return boundingBoxBelow(0.0); }
+
+BBoxd Shell::boundingBoxBelow(double level) const
 {
-    const BBoxd box = mChild->boundingBox();
-    if (mChild->isExactOutside() && isFinite(box)) return grown(box, mHalf);
-    if (mSolid) return mSolid->boundingBox();
-    return infiniteBox();
+    // |f| - t/2 below the level only where f is below level + t/2.
+    BBoxd box = mChild->boundingBoxBelow(level + mHalf);
+    if (mSolid && level <= 0.0) box = within(box, mSolid->boundingBox());
+    return box;
 }
 
 Implicit::Ptr Shell::prune(const BBoxd& box) const

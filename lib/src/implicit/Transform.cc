@@ -372,9 +372,13 @@ void Transform::intervals(const double* cx, const double* cy, const double* cz, 
 #pragma GCC diagnostic pop
 #endif
 
-BBoxd Transform::boundingBox() const
+BBoxd Transform::boundingBox() const { return boundingBoxBelow(0.0); }
+
+BBoxd Transform::boundingBoxBelow(double level) const
 {
-    const BBoxd c = mChild->boundingBox();
+    // The value is mValueScale times the child's at the mapped point (the scale, or min(scale)
+    // for a non-uniform one): below the level where the child's is below level / mValueScale.
+    const BBoxd c = mChild->boundingBoxBelow(level / mValueScale);
     if (!isFinite(c)) return infiniteBox();
     return mapBox(c, [this](const Vec3d& q) { return toWorld(q); });
 }

@@ -108,6 +108,7 @@ public:
     /// outside (the blend reaches at most that far beyond them), else unbounded. Intersection,
     /// difference: within the sharp result.
     BBoxd boundingBox() const override;
+    BBoxd boundingBoxBelow(double level) const override;
     bool isExactSdf() const override { return false; }
     /// Of 1-Lipschitz children: both kernels' gradients are convex combinations of the
     /// children's (the weights d f / d t_i are >= 0 and sum to 1).

@@ -32,6 +32,7 @@ public:
                     std::size_t n, const FootQuery& query, FootPoints& out) const override;
     Interval interval(const BBoxd& box) const override;
     BBoxd boundingBox() const override;
+    BBoxd boundingBoxBelow(double level) const override;
     bool isExactSdf() const override;
     /// A union of shapes exact outside is the distance outside it.
     bool isExactOutside() const override;
@@ -104,6 +105,7 @@ public:
     void intervals(const double* cx, const double* cy, const double* cz, const Vec3d& half,
                    std::size_t n, double* lo, double* hi) const override;
     BBoxd boundingBox() const override;
+    BBoxd boundingBoxBelow(double level) const override;
     bool isExactSdf() const override;
     bool isExactOutside() const override;
     /// Of a 1-Lipschitz child, at any scale (the point moves by at most 1 / min(scale) in the

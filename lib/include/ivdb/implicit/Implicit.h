@@ -104,6 +104,12 @@ public:
                            const Vec3d& half, std::size_t n, double* lo, double* hi) const;
     /// @brief A box outside which the shape has no inside points (infiniteBox() if unbounded).
     virtual BBoxd boundingBox() const = 0;
+    /// @brief A box holding every point where value() < @a level (for a level of 0 or less,
+    /// boundingBox()): by default the box grown by the level where the value is the distance
+    /// outside (isExactOutside()), else infiniteBox(). Offsets, shells and blends, which grow
+    /// their children's surfaces, ask their children for it; a transform, a CSG node and those
+    /// pass it on, so a non-uniformly scaled child in a blend is bounded too.
+    virtual BBoxd boundingBoxBelow(double level) const;
     /// @brief True if value() is the exact signed Euclidean distance to the surface.
     virtual bool isExactSdf() const = 0;
     /// @brief True if value() is the exact distance wherever it is positive (outside): exact

@@ -30,6 +30,7 @@ public:
     /// The child's box, grown by d > 0 when the child is exact outside; the solid's (solid())
     /// for a grown child that is not; else unbounded.
     BBoxd boundingBox() const override;
+    BBoxd boundingBoxBelow(double level) const override;
     bool isExactSdf() const override { return false; }
     /// Grown (d >= 0) from a shape exact outside: f - d is the distance outside.
     bool isExactOutside() const override;
@@ -75,6 +76,7 @@ public:
     /// The child's box grown by t/2 when the child is exact outside, else the solid's (solid()),
     /// else unbounded.
     BBoxd boundingBox() const override;
+    BBoxd boundingBoxBelow(double level) const override;
     bool isExactSdf() const override { return false; }
     /// For an exact SDF child: both of the shell's surfaces are offsets of the child's.
     bool isExactOutside() const override { return mChild->isExactSdf(); }
