@@ -7,6 +7,7 @@
 #include <openvdb/Exceptions.h>
 
 #include "../util/Simd.h"
+#include "Children.h"
 #include "FastMath.h"
 #include "Scratch.h"
 
@@ -234,20 +235,9 @@ Blend::Blend(Op op, const BlendKernel& kernel, std::vector<Ptr> children)
     }
 }
 
-bool Blend::isDistanceBound() const
-{
-    for (const auto& c : mChildren) {
-        if (!c->isDistanceBound()) return false;
-    }
-    return true;
-}
+bool Blend::isDistanceBound() const { return detail::allDistanceBound(mChildren); }
 
-double Blend::lipschitzBound() const
-{
-    double most = 1.0;
-    for (const auto& c : mChildren) most = std::max(most, c->lipschitzBound());
-    return most;
-}
+double Blend::lipschitzBound() const { return detail::largestLipschitzBound(mChildren); }
 
 std::string Blend::typeName() const
 {

@@ -6,6 +6,7 @@
 #include <openvdb/Exceptions.h>
 
 #include "../util/Simd.h"
+#include "Children.h"
 #include "Scratch.h"
 #include "SphereMath.h"
 
@@ -195,20 +196,9 @@ BBoxd Csg::boundingBoxBelow(double level) const
     return infiniteBox();
 }
 
-bool Csg::isDistanceBound() const
-{
-    for (const auto& c : mChildren) {
-        if (!c->isDistanceBound()) return false;
-    }
-    return true;
-}
+bool Csg::isDistanceBound() const { return detail::allDistanceBound(mChildren); }
 
-double Csg::lipschitzBound() const
-{
-    double most = 1.0;
-    for (const auto& c : mChildren) most = std::max(most, c->lipschitzBound());
-    return most;
-}
+double Csg::lipschitzBound() const { return detail::largestLipschitzBound(mChildren); }
 
 bool Csg::isExactOutside() const
 {
