@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <initializer_list>
 #include <limits>
 #include <memory>
@@ -505,24 +506,47 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
 /// nothing certain (the iteration did not converge).
 enum class Crease { Found, None, Failed };
 
+/// The crease of two spheres: a circle (centre, unit axis u, radius rho), or none where they do
+/// not cut each other.
+struct SphereCircle
+{
+    bool exists = false;
+    Vec3d centre, u;
+    double rho = 0.0, scale = 0.0; // scale: d + ra, for the on-axis test
+
+    SphereCircle(const Sphere& a, const Sphere& b)
+    {
+        const Vec3d axis = b.center() - a.center();
+        const double d = axis.length(), ra = a.radius(), rb = b.radius();
+        if (!(d > std::abs(ra - rb)) || !(d < ra + rb)) return;
+        exists = true;
+        u = axis / d;
+        const double t = (d * d + ra * ra - rb * rb) / (2.0 * d);
+        rho = std::sqrt(std::max(ra * ra - t * t, 0.0));
+        centre = a.center() + u * t;
+        scale = d + ra;
+    }
+
+    /// The circle's point nearest @a p (exists), any of them for a point on its axis.
+    Vec3d nearest(const Vec3d& p) const
+    {
+        Vec3d w = (p - centre) - u * dot(p - centre, u);
+        double len = w.length();
+        if (!(len > 1e-12 * scale)) { // on the axis: every point of the circle is as near
+            w = std::abs(u[0]) < 0.9 ? u.cross(Vec3d(1, 0, 0)) : u.cross(Vec3d(0, 1, 0));
+            len = w.length();
+        }
+        return centre + w * (rho / len);
+    }
+};
+
 /// The crease of two spheres is a circle, or nothing where they do not cut each other: the
 /// circle's point nearest @a p in closed form (any of them for a point on its axis).
 Crease sphereCrease(const Sphere& a, const Sphere& b, const Vec3d& p, Vec3d& out)
 {
-    const Vec3d axis = b.center() - a.center();
-    const double d = axis.length(), ra = a.radius(), rb = b.radius();
-    if (!(d > std::abs(ra - rb)) || !(d < ra + rb)) return Crease::None;
-    const Vec3d u = axis / d;
-    const double t = (d * d + ra * ra - rb * rb) / (2.0 * d);
-    const double rho = std::sqrt(std::max(ra * ra - t * t, 0.0));
-    const Vec3d centre = a.center() + u * t;
-    Vec3d w = (p - centre) - u * dot(p - centre, u);
-    double len = w.length();
-    if (!(len > 1e-12 * (d + ra))) { // on the axis: every point of the circle is as near
-        w = std::abs(u[0]) < 0.9 ? u.cross(Vec3d(1, 0, 0)) : u.cross(Vec3d(0, 1, 0));
-        len = w.length();
-    }
-    out = centre + w * (rho / len);
+    const SphereCircle circle(a, b);
+    if (!circle.exists) return Crease::None;
+    out = circle.nearest(p);
     return Crease::Found;
 }
 
@@ -1066,6 +1090,106 @@ void sphereUnionDeepestFeet(const double* __restrict s, std::size_t m, const dou
     for (std::size_t i = 0; i < n; ++i) found[i] = outside[i] && depth[i] <= -u[i] + tol;
 }
 
+/// sphereUnionNearest() takes unions of at most this many spheres (their corners, one for each
+/// three, are found for every batch); nearestInside() the others.
+constexpr std::size_t kMaxClosedFormSpheres = 12;
+
+/// Inside a union of spheres @a children, near a crease (where the deepest sphere's foot point lies in
+/// another sphere), at @a n points: CsgTerms::nearestInside()'s candidates
+/// in closed form, without its set-up: each sphere's foot point (the radial projection), the
+/// nearest point of each two spheres' crease circle, and each three spheres' corners, where the
+/// point lies outside every other sphere (within @a tol), of the spheres within @a far of the
+/// point (any other sphere's points are farther). The nearest is the nearest point of the
+/// union's surface: @a depth (at most far) and @a q, certified in @a found, unless a point is
+/// at a sphere's centre (no foot point: left uncertified for nearestInside()).
+void sphereUnionNearest(const std::vector<Implicit::Ptr>& children, const double* x,
+                        const double* y, const double* z, std::size_t n,
+                        double tol, double far, double* qx, double* qy, double* qz,
+                        double* depth, bool* found)
+{
+    const std::size_t m = children.size();
+    const Sphere* s[kMaxClosedFormSpheres];
+    for (std::size_t c = 0; c < m; ++c) s[c] = static_cast<const Sphere*>(children[c].get());
+    auto outsideOthers = [&](const Vec3d& q, std::size_t a, std::size_t b, std::size_t e) {
+        for (std::size_t c = 0; c < m; ++c) {
+            if (c == a || c == b || c == e) continue;
+            // CsgTerms::outsideOthers()' test: |q - centre| >= radius - tolerance, squared.
+            const double least = s[c]->radius() - tol;
+            if (!(least <= 0.0 || (q - s[c]->center()).lengthSqr() >= least * least)) return false;
+        }
+        return true;
+    };
+    // The corners do not depend on the point: those outside the other spheres, once, with the
+    // spheres they lie on as bits.
+    struct Corner
+    {
+        Vec3d q;
+        std::uint64_t on;
+    };
+    Corner corners[2 * kMaxClosedFormSpheres * kMaxClosedFormSpheres * kMaxClosedFormSpheres / 6];
+    std::size_t cornerCount = 0;
+    for (std::size_t a = 0; a < m; ++a) {
+        for (std::size_t b = a + 1; b < m; ++b) {
+            for (std::size_t c = b + 1; c < m; ++c) {
+                Vec3d at[2];
+                const int count = sphereCorners({s[a], s[b], s[c]}, at);
+                for (int k = 0; k < count; ++k) {
+                    if (outsideOthers(at[k], a, b, c)) {
+                        corners[cornerCount++] = {at[k], (1ull << a) | (1ull << b) | (1ull << c)};
+                    }
+                }
+            }
+        }
+    }
+    // The crease circles, likewise (sphereCrease()'s).
+    std::vector<SphereCircle> circles;
+    circles.reserve(m * (m - 1) / 2);
+    for (std::size_t a = 0; a < m; ++a) {
+        for (std::size_t b = a + 1; b < m; ++b) circles.emplace_back(*s[a], *s[b]);
+    }
+    const std::size_t none = m;
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3d p(x[i], y[i], z[i]);
+        double best = std::numeric_limits<double>::max();
+        Vec3d nearest = p;
+        auto offer = [&](const Vec3d& q) {
+            const double d = (p - q).length();
+            if (d < best) best = d, nearest = q;
+        };
+        std::uint64_t near = 0;
+        bool complete = true;
+        for (std::size_t c = 0; c < m; ++c) {
+            const Vec3d& centre = s[c]->center();
+            const double t =
+                detail::sphereValue(p[0], p[1], p[2], centre[0], centre[1], centre[2],
+                                    s[c]->radius());
+            if (!(t < far)) continue;
+            near |= 1ull << c;
+            const Vec3d r = p - centre;
+            const double len = r.length();
+            if (!(len > 0.0)) {
+                complete = false;
+                continue;
+            }
+            const Vec3d q = centre + r * (s[c]->radius() / len);
+            if (outsideOthers(q, c, none, none)) offer(q);
+        }
+        for (std::size_t a = 0, pair = 0; a < m && complete; ++a) {
+            for (std::size_t b = a + 1; b < m; ++b, ++pair) {
+                if (!(near >> a & 1) || !(near >> b & 1) || !circles[pair].exists) continue;
+                const Vec3d q = circles[pair].nearest(p);
+                if (outsideOthers(q, a, b, none)) offer(q);
+            }
+        }
+        for (std::size_t k = 0; k < cornerCount; ++k) {
+            if ((corners[k].on & near) == corners[k].on) offer(corners[k].q);
+        }
+        found[i] = complete;
+        depth[i] = std::min(best, far);
+        qx[i] = nearest[0], qy[i] = nearest[1], qz[i] = nearest[2];
+    }
+}
+
 /// Csg::footPoints at every point (the children's distances, then the lead rule or the nearest
 /// point inside).
 void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const double* x,
@@ -1178,22 +1302,34 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
         double u[kMaxBatch], qx[kMaxBatch], qy[kMaxBatch], qz[kMaxBatch], depth[kMaxBatch];
         for (std::size_t k = 0; k < m; ++k) u[k] = values[idx[k]];
         bool found[kMaxBatch];
+        // The points found (depth and foot point) settled, the others compacted.
+        auto settle = [&]() {
+            std::size_t kept = 0;
+            for (std::size_t k = 0; k < m; ++k) {
+                const std::size_t i = idx[k];
+                if (found[k]) {
+                    out.distance[i] = -depth[k];
+                    out.ok[i] = true;
+                    out.x[i] = qx[k], out.y[i] = qy[k], out.z[i] = qz[k];
+                }
+                idx[kept] = i;
+                sx[kept] = sx[k], sy[kept] = sy[k], sz[kept] = sz[k];
+                kept += !found[k];
+            }
+            m = kept;
+        };
         sphereUnionDeepestFeet(mSpheres.data(), mChildren.size(), sx, sy, sz, u, m,
                                query.tolerance, query.far, qx, qy, qz, depth, found);
-        left = 0;
-        for (std::size_t k = 0; k < m; ++k) {
-            const std::size_t i = idx[k];
-            if (found[k]) {
-                out.distance[i] = -depth[k];
-                out.ok[i] = true;
-                out.x[i] = qx[k], out.y[i] = qy[k], out.z[i] = qz[k];
-            }
-            idx[left] = i;
-            sx[left] = sx[k], sy[left] = sy[k], sz[left] = sz[k];
-            left += !found[k];
-        }
-        m = left;
+        settle();
         if (m == 0) return;
+        // Then the nearest of every candidate, in closed form, for the few spheres of a
+        // pruned union (kMaxClosedFormSpheres).
+        if (mChildren.size() <= kMaxClosedFormSpheres) {
+            sphereUnionNearest(mChildren, sx, sy, sz, m, query.tolerance, query.far, qx, qy, qz,
+                               depth, found);
+            settle();
+            if (m == 0) return;
+        }
     }
     FootPoints sub;
     csgFootPoints(mChildren, mOp, sx, sy, sz, m, query, sub,
