@@ -1146,6 +1146,63 @@ TEST_F(TestTrueDistances, NonUniformScaleOfACappedCylinderOrConeIsItsQuadricBetw
     }
 }
 
+TEST_F(TestTrueDistances, BlendOfAScaledCappedShapeIsThatShapeWhereItLeads)
+{
+    // A blend (p = 30) of a non-uniformly scaled capped cylinder or cone (not an exact SDF, its
+    // rims sharp edges) and a small sphere: where the sphere is at least 0.6 farther than the
+    // voxel's distance (the blend then differs from the scaled shape by exp(-18) / 30, 5e-8
+    // voxel), the distances are the scaled shape's, against the parameter search
+    // (mappedConeDistance) within the certified tolerance, 1e-3 voxel, at 300 or more voxels.
+    // A union, and a difference (the sphere cut out of the shape). Before, the smooth iteration
+    // on the blended field (not smooth at the rims) answered 3,791 such voxels of the cylinder's
+    // union up to 0.95 voxel off, and left 5,943 voxels approximate to the lattice search.
+    struct Case { const char* what; implicit::CsgOp op; Vec3d a, b; double ra, rb; Vec3d deg, scale; Vec3d centre; };
+    const Case cases[] = {
+        {"capped cylinder + sphere", implicit::CsgOp::Union, Vec3d(0, -0.6, 0), Vec3d(0, 0.6, 0),
+         0.4, 0.4, Vec3d(20, 10, 0), Vec3d(1.3, 0.8, 1.0), Vec3d(0.9, 0.3, 0.0)},
+        {"capped cone - sphere", implicit::CsgOp::Difference, Vec3d(0.1, -0.5, 0),
+         Vec3d(-0.1, 0.5, 0.1), 0.45, 0.2, Vec3d(-20, 35, 10), Vec3d(0.7, 1.3, 1.1),
+         Vec3d(0.0, 0.55, 0.1)}};
+    const double dx = 0.01, sphereRadius = 0.2, margin = 0.6;
+    for (const Case& c : cases) {
+        const auto shape = std::make_shared<implicit::Transform>(
+            std::make_shared<implicit::CappedCone>(c.a, c.b, c.ra, c.rb), Vec3d(0.0), c.deg, c.scale);
+        const auto sphere = std::make_shared<implicit::Sphere>(c.centre, sphereRadius);
+        const auto blend = std::make_shared<implicit::Blend>(
+            c.op, 30.0, std::vector<implicit::Implicit::Ptr>{shape, sphere});
+        raster::RasterStats stats;
+        raster::RasterSettings s = settings(dx);
+        s.stats = &stats;
+        const auto g = raster::rasterize(blend, s);
+        EXPECT_EQ(stats.sweptDistances, 0u) << c.what;
+        std::vector<std::pair<Vec3d, float>> led;
+        for (auto it = g->cbeginValueOn(); it; ++it) {
+            const Vec3d p = Vec3d(it.getCoord().x(), it.getCoord().y(), it.getCoord().z()) * dx;
+            if (std::abs(sphere->value(p)) - std::abs(double(*it)) >= margin) led.emplace_back(p, *it);
+        }
+        ASSERT_GT(led.size(), 10000u) << c.what;
+        const std::size_t every = led.size() / 400;
+        int checked = 0;
+        double worst = 0.0;
+        for (std::size_t k = 0; k < led.size(); k += every) {
+            const auto& [p, v] = led[k];
+            const double sign = shape->value(p) < 0.0 ? -1.0 : 1.0;
+            const double ref = sign * mappedConeDistance(*shape, c.a, c.b, c.ra, c.rb, p);
+            const double err = std::abs(double(v) - ref) / dx;
+            worst = std::max(worst, err);
+            EXPECT_LE(err, 1e-3) << c.what << " at " << p << ": " << v / dx << " voxels, the "
+                                 << "scaled shape's surface " << ref / dx << " voxels away";
+            ++checked;
+        }
+        EXPECT_GE(checked, 300) << c.what;
+        std::printf("%s: %zu voxels the shape leads, %d checked, worst %.2g voxel; %llu local, "
+                    "%llu searched (%llu approximate)\n", c.what, led.size(), checked, worst,
+                    (unsigned long long)stats.localDistances,
+                    (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
+                    (unsigned long long)stats.approximateDistances);
+    }
+}
+
 TEST_F(TestTrueDistances, NonUniformScaleOfACsgIsTheCsgOfItsChildrenScaled)
 {
     // A union of two boxes, rotated and scaled non-uniformly, is the union of the two scaled

@@ -1569,9 +1569,90 @@ bool Blend::leadRuleApplies() const
     return true;
 }
 
+bool Blend::childLeadApplies() const
+{
+    if (mChildren.size() > 64) return false;
+    for (const auto& c : mChildren) {
+        if (!c->isDistanceBound() || !std::isfinite(c->distanceFactor())) return false;
+    }
+    return true;
+}
+
+void Blend::childLeadFootPoints(const double* x, const double* y, const double* z,
+                                const double* values, std::size_t n, const FootQuery& query,
+                                FootPoints& out) const
+{
+    // The lead rule with the deciding child's own distance D (its foot points) in place of its
+    // value, which for a child that is not an exact SDF only bounds it from below: where the
+    // next term exceeds D by the lead, every point of the blend's surface within D of the point
+    // lies where the blend is the deciding child within the blend's value tolerance, and a
+    // value that small puts the child's surface within distanceFactor() times it; so the
+    // reach is taken at the tolerance over the largest factor (docs/method.md#true-distances).
+    // Elsewhere, the smooth iteration on the blended field. A non-uniformly scaled capped
+    // cylinder in a blend: its rims (edges, where the iteration cannot converge) far from the
+    // other child get the scaled shape's own foot points.
+    const std::size_t nc = mChildren.size();
+    double factor = 1.0;
+    for (const auto& c : mChildren) factor = std::max(factor, c->distanceFactor());
+    const double lead = mKernel.reach(query.tolerance / factor) + mKernel.swell(nc);
+    const double rho = mOp == Op::Union ? 1.0 : -1.0;
+    auto termSign = [this](std::size_t c) {
+        return mOp == Op::Difference && c > 0 ? -1.0 : 1.0;
+    };
+    const detail::BatchRows rows(nc * n);
+    double* terms = rows.get();
+    childRows(x, y, z, n, terms, nullptr);
+    std::size_t decider[kMaxBatch];
+    double second[kMaxBatch];
+    bool candidate[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        double first = std::numeric_limits<double>::max();
+        second[i] = first;
+        decider[i] = 0;
+        for (std::size_t c = 0; c < nc; ++c) {
+            const double u = rho * terms[c * n + i];
+            if (u < first) second[i] = first, first = u, decider[i] = c;
+            else if (u < second[i]) second[i] = u;
+        }
+        out.ok[i] = std::abs(values[i]) >= query.far; // 1-Lipschitz: that far at least
+        out.distance[i] = values[i];
+        out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
+        // D >= |value|: the rule with the value is necessary for the rule with D.
+        candidate[i] = !out.ok[i] && leadKeepsDistance(first, second[i], lead);
+    }
+    // The child's distances in full up to where the blend's value can put a point it leads.
+    FootQuery childQuery = query;
+    childQuery.far = query.far + mKernel.swell(nc);
+    for (std::size_t c = 0; c < nc; ++c) {
+        std::size_t idx[kMaxBatch], m = 0;
+        double cx[kMaxBatch], cy[kMaxBatch], cz[kMaxBatch], cv[kMaxBatch];
+        for (std::size_t i = 0; i < n; ++i) {
+            if (!candidate[i] || decider[i] != c) continue;
+            idx[m] = i;
+            cx[m] = x[i], cy[m] = y[i], cz[m] = z[i];
+            cv[m++] = termSign(c) * terms[c * n + i]; // the child's own value
+        }
+        if (m == 0) continue;
+        FootPoints feet;
+        mChildren[c]->footPoints(cx, cy, cz, cv, m, childQuery, feet);
+        for (std::size_t k = 0; k < m; ++k) {
+            const std::size_t i = idx[k];
+            const double d = termSign(c) * feet.distance[k]; // in the blend's sign
+            if (!feet.ok[k] || !leadKeepsDistance(rho * d, second[i], lead)) continue;
+            out.distance[i] = d;
+            out.ok[i] = true;
+            out.x[i] = feet.x[k], out.y[i] = feet.y[k], out.z[i] = feet.z[k];
+        }
+    }
+    detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+}
+
 void Blend::footPoints(const double* x, const double* y, const double* z, const double* values,
                        std::size_t n, const FootQuery& query, FootPoints& out) const
 {
+    if (!leadRuleApplies() && childLeadApplies()) {
+        return childLeadFootPoints(x, y, z, values, n, query, out);
+    }
     if (!leadRuleApplies()) return Implicit::footPoints(x, y, z, values, n, query, out);
     // With foot points asked for, the children's values and gradients once, for the lead rule
     // (the deciding child's gradient) and for the smooth iteration's start (the blend's

@@ -395,6 +395,13 @@ double Transform::uniformScale() const
     return mScale[0] == mScale[1] && mScale[1] == mScale[2] ? mScale[0] : 0.0;
 }
 
+double Transform::distanceFactor() const
+{
+    const double k = mChild->distanceFactor();
+    if (uniformScale() > 0.0) return k;
+    return k * std::max({mScale[0], mScale[1], mScale[2]}) / mValueScale;
+}
+
 bool Transform::isExactSdf() const
 {
     return mChild->isExactSdf() && uniformScale() > 0.0;

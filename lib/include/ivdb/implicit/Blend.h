@@ -139,6 +139,14 @@ private:
     bool valuesFromRows(const double* terms, std::size_t n, double* values, double* w) const;
     /// True if the foot points can use the lead rule: every child an exact SDF, at most 64.
     bool leadRuleApplies() const;
+    /// True if they can use it with the children's own distances: every child 1-Lipschitz
+    /// with a finite distanceFactor(), at most 64.
+    bool childLeadApplies() const;
+    /// footPoints() by the lead rule with the deciding child's own foot points (where
+    /// childLeadApplies()), the smooth iteration elsewhere.
+    void childLeadFootPoints(const double* x, const double* y, const double* z,
+                             const double* values, std::size_t n, const FootQuery& query,
+                             FootPoints& out) const;
     /// footPoints() from childRows()' @a terms and gradients @a cg; @a w holds the weights
     /// d f / d t if @a haveWeights, else is where they are computed. @a cg and @a w null (no
     /// foot points asked for): the children's values alone, and the blend's gradients found

@@ -113,6 +113,8 @@ public:
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
     /// The child's: min(scale) times the child's rate along a move of at most 1 / min(scale).
     double lipschitzBound() const override { return mChild->lipschitzBound(); }
+    /// The child's, times max(scale) / min(scale) for a non-uniform scale.
+    double distanceFactor() const override;
     /// The surface footPoints() answers for a non-uniform scale, where that is a world quadric
     /// or an exact SDF (a box moved rigidly).
     Ptr sameSurface() const override;
