@@ -1035,19 +1035,24 @@ TEST_F(TestImplicit, IsDistanceBoundWhereTheFieldIs1Lipschitz)
 
 TEST_F(TestImplicit, DistanceFactorBoundsTheDistanceByTheValue)
 {
-    // distanceFactor() K: every point within K |f| of the surface. An exact SDF 1; a sphere
-    // scaled by (1.5, 1, 0.75) (an ellipsoid, its field 0.75 (|S^-1 (p - t)| - r)) 2, and the
-    // point q = t + (p - t) r / |S^-1 (p - t)| on its surface within K |f| of p at 20,000 random
-    // points (near and far, inside and out); scaled again by 2 uniformly and rotated, still 2;
-    // shapes with no known factor (a quadric, a blend) infinite.
+    // distanceFactor() K: every point within K |f| of the surface, outside and inside. An
+    // exact SDF 1; a sphere scaled by (1.5, 1, 0.75) (an ellipsoid, its field
+    // 0.75 (|S^-1 (p - t)| - r)) 2, and the point q = t + (p - t) r / |S^-1 (p - t)| on its
+    // surface within K |f| of p at 20,000 random points (near and far, inside and out); scaled
+    // again by 2 uniformly and rotated, still 2; a union of exact SDFs 1 outside (its value the
+    // distance) but not inside (a point deep in one child may be far from the union's surface),
+    // an intersection and a difference the other way round, and not for a union of the scaled
+    // sphere; shapes with no known factor (a quadric, a blend) infinite.
     const auto sphere = std::make_shared<Sphere>(Vec3d(0.0), 0.4);
-    EXPECT_EQ(sphere->distanceFactor(), 1.0);
+    EXPECT_EQ(sphere->distanceFactor(true), 1.0);
+    EXPECT_EQ(sphere->distanceFactor(false), 1.0);
     const Vec3d t(0.1, -0.2, 0.05), scale(1.5, 1.0, 0.75);
     const auto scaled = std::make_shared<Transform>(sphere, t, Vec3d(0.0), scale);
-    EXPECT_DOUBLE_EQ(scaled->distanceFactor(), 2.0);
+    EXPECT_DOUBLE_EQ(scaled->distanceFactor(true), 2.0);
+    EXPECT_DOUBLE_EQ(scaled->distanceFactor(false), 2.0);
     const auto again = std::make_shared<Transform>(scaled, Vec3d(0.3, 0, 0),
                                                              Vec3d(10, 20, 30), Vec3d(2.0));
-    EXPECT_DOUBLE_EQ(again->distanceFactor(), 2.0);
+    EXPECT_DOUBLE_EQ(again->distanceFactor(true), 2.0);
     std::mt19937 rng(20261205);
     std::uniform_real_distribution<double> at(-1.2, 1.2);
     int checked = 0;
@@ -1056,16 +1061,29 @@ TEST_F(TestImplicit, DistanceFactorBoundsTheDistanceByTheValue)
         const Vec3d local((p - t).x() / scale.x(), (p - t).y() / scale.y(), (p - t).z() / scale.z());
         if (!(local.length() > 1e-9)) continue;
         const Vec3d q = t + (p - t) * (0.4 / local.length());
-        EXPECT_LE((p - q).length(), scaled->distanceFactor() * std::abs(scaled->value(p)) + 1e-12)
+        EXPECT_LE((p - q).length(), scaled->distanceFactor(scaled->value(p) > 0.0) * std::abs(scaled->value(p)) + 1e-12)
             << "at " << p;
         ++checked;
     }
     EXPECT_GT(checked, 19000);
     const auto quadric = makeEllipsoid(Vec3d(0.0), Vec3d(1.0, 0.8, 0.6));
-    EXPECT_TRUE(std::isinf(quadric->distanceFactor()));
+    EXPECT_TRUE(std::isinf(quadric->distanceFactor(true)));
+    const auto box = std::make_shared<Box>(Vec3d(0.2, 0.0, 0.0), Vec3d(0.5, 0.3, 0.4));
+    const std::vector<Implicit::Ptr> two{sphere, box};
+    const auto unite = std::make_shared<Csg>(CsgOp::Union, two);
+    const auto cut = std::make_shared<Csg>(CsgOp::Intersection, two);
+    const auto minus = std::make_shared<Csg>(CsgOp::Difference, two);
+    EXPECT_EQ(unite->distanceFactor(true), 1.0);
+    EXPECT_TRUE(std::isinf(unite->distanceFactor(false)));
+    EXPECT_EQ(cut->distanceFactor(false), 1.0);
+    EXPECT_TRUE(std::isinf(cut->distanceFactor(true)));
+    EXPECT_EQ(minus->distanceFactor(false), 1.0);
+    EXPECT_TRUE(std::isinf(minus->distanceFactor(true)));
+    EXPECT_TRUE(std::isinf(std::make_shared<Csg>(CsgOp::Union, std::vector<Implicit::Ptr>{scaled, box})
+                               ->distanceFactor(true)));
     const auto blend = std::make_shared<Blend>(CsgOp::Union, 20.0,
                                                          std::vector<Implicit::Ptr>{sphere, scaled});
-    EXPECT_TRUE(std::isinf(blend->distanceFactor()));
+    EXPECT_TRUE(std::isinf(blend->distanceFactor(true)));
 }
 
 TEST_F(TestImplicit, GridShapesChangeNoFasterThanTheirLipschitzBound)

@@ -1203,6 +1203,70 @@ TEST_F(TestTrueDistances, BlendOfAScaledCappedShapeIsThatShapeWhereItLeads)
     }
 }
 
+TEST_F(TestTrueDistances, BlendOfACsgIsThatCsgWhereItLeads)
+{
+    // A blend (p = 30) of a union of a box and a sphere (1-Lipschitz, the distance outside but
+    // not an exact SDF: its edges and crease are not smooth) and a small sphere: where the
+    // small sphere is at least 0.6 farther than the voxel's distance (the blend differs from
+    // the union by 5e-8 voxel there), the distances are the union's: outside it, the least of
+    // the box's and the sphere's closed forms; everywhere, the union rasterized alone (its
+    // distances inside against closed forms: TwoSphereCsgIsTheDistanceToItsSurface,
+    // CsgOfBoxesIsTheDistanceToItsSurface), within 1e-3 voxel. Before, the smooth iteration on
+    // the blended field answered 1,142 such voxels up to 0.97 voxel off and left 5,143 to the
+    // lattice search (4,047 approximate).
+    const double dx = 0.01;
+    const Vec3d boxCentre(0.0), boxSize(0.8, 0.6, 0.7), ballCentre(0.35, 0.3, 0.1);
+    const double ballRadius = 0.3;
+    const auto box = std::make_shared<implicit::Box>(boxCentre, boxSize);
+    const auto ball = std::make_shared<implicit::Sphere>(ballCentre, ballRadius);
+    const auto unite = std::make_shared<implicit::Csg>(implicit::CsgOp::Union,
+                                                       std::vector<implicit::Implicit::Ptr>{box, ball});
+    const auto small = std::make_shared<implicit::Sphere>(Vec3d(-0.9, -0.2, 0.0), 0.2);
+    const auto blend = std::make_shared<implicit::Blend>(
+        implicit::CsgOp::Union, 30.0, std::vector<implicit::Implicit::Ptr>{unite, small});
+    raster::RasterStats stats;
+    raster::RasterSettings s = settings(dx);
+    s.stats = &stats;
+    const auto g = raster::rasterize(blend, s);
+    const auto alone = raster::rasterize(unite, settings(dx));
+    auto boxDistance = [&](const Vec3d& p) {
+        double outside = 0.0, inside = -std::numeric_limits<double>::max();
+        for (int i = 0; i < 3; ++i) {
+            const double d = std::abs(p[i] - boxCentre[i]) - 0.5 * boxSize[i];
+            outside += d > 0.0 ? d * d : 0.0;
+            inside = std::max(inside, d);
+        }
+        return std::sqrt(outside) + std::min(inside, 0.0);
+    };
+    auto acc = alone->getConstAccessor();
+    std::size_t led = 0, outside = 0;
+    double worst = 0.0;
+    for (auto it = g->cbeginValueOn(); it; ++it) {
+        const Vec3d p = Vec3d(it.getCoord().x(), it.getCoord().y(), it.getCoord().z()) * dx;
+        if (std::abs(small->value(p)) - std::abs(double(*it)) < 0.6) continue;
+        ++led;
+        float a = 0.0f;
+        ASSERT_TRUE(acc.probeValue(it.getCoord(), a)) << "at " << p;
+        const double err = std::abs(double(*it) - double(a)) / dx;
+        worst = std::max(worst, err);
+        EXPECT_LE(err, 1e-3) << "at " << p << ": " << *it / dx << " voxels, the union alone "
+                             << a / dx;
+        if (*it > 0.0f) {
+            ++outside;
+            const double ref = std::min(boxDistance(p), (p - ballCentre).length() - ballRadius);
+            EXPECT_LE(std::abs(double(*it) - ref) / dx, 1e-3) << "at " << p;
+        }
+    }
+    EXPECT_GT(led, 100000u);
+    EXPECT_GT(outside, 40000u);
+    EXPECT_EQ(stats.sweptDistances, 0u);
+    std::printf("blend of a union: %zu voxels the union leads (%zu outside), worst %.2g voxel; "
+                "%llu local, %llu searched (%llu approximate)\n", led, outside, worst,
+                (unsigned long long)stats.localDistances,
+                (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
+                (unsigned long long)stats.approximateDistances);
+}
+
 TEST_F(TestTrueDistances, NonUniformScaleOfACsgIsTheCsgOfItsChildrenScaled)
 {
     // A union of two boxes, rotated and scaled non-uniformly, is the union of the two scaled

@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace ivdb::implicit {
 
@@ -199,6 +200,21 @@ BBoxd Csg::boundingBoxBelow(double level) const
 bool Csg::isDistanceBound() const { return detail::allDistanceBound(mChildren); }
 
 double Csg::lipschitzBound() const { return detail::largestLipschitzBound(mChildren); }
+
+double Csg::distanceFactor(bool outside) const
+{
+    // Outside a union, the least child value is the distance where every child's positive
+    // value is; inside an intersection, the greatest (least deep) where every child's negative
+    // one is (a difference intersects the first child with the others' complements).
+    const double none = std::numeric_limits<double>::infinity();
+    if (mChildren.size() == 1) return mChildren[0]->distanceFactor(outside);
+    if (outside != (mOp == Op::Union)) return none;
+    for (std::size_t c = 0; c < mChildren.size(); ++c) {
+        const bool side = mOp == Op::Difference && c > 0 ? !outside : outside;
+        if (mChildren[c]->distanceFactor(side) != 1.0) return none;
+    }
+    return 1.0;
+}
 
 bool Csg::isExactOutside() const
 {

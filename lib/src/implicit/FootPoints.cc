@@ -1569,13 +1569,21 @@ bool Blend::leadRuleApplies() const
     return true;
 }
 
+double Blend::childLeadFactor() const
+{
+    // A term rho s_c f_c just above 0: child c's positive side where rho s_c > 0.
+    double factor = 1.0;
+    for (std::size_t c = 0; c < mChildren.size(); ++c) {
+        const bool flip = (mOp != Op::Union) != (mOp == Op::Difference && c > 0);
+        if (!mChildren[c]->isDistanceBound()) return std::numeric_limits<double>::infinity();
+        factor = std::max(factor, mChildren[c]->distanceFactor(!flip));
+    }
+    return factor;
+}
+
 bool Blend::childLeadApplies() const
 {
-    if (mChildren.size() > 64) return false;
-    for (const auto& c : mChildren) {
-        if (!c->isDistanceBound() || !std::isfinite(c->distanceFactor())) return false;
-    }
-    return true;
+    return mChildren.size() <= 64 && std::isfinite(childLeadFactor());
 }
 
 void Blend::childLeadFootPoints(const double* x, const double* y, const double* z,
@@ -1585,16 +1593,15 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
     // The lead rule with the deciding child's own distance D (its foot points) in place of its
     // value, which for a child that is not an exact SDF only bounds it from below: where the
     // next term exceeds D by the lead, every point of the blend's surface within D of the point
-    // lies where the blend is the deciding child within the blend's value tolerance, and a
-    // value that small puts the child's surface within distanceFactor() times it; so the
-    // reach is taken at the tolerance over the largest factor (docs/method.md#true-distances).
+    // lies where the blend is the deciding child within the blend's value tolerance, on the
+    // side of the child where its term is positive, and a value that small puts the child's
+    // surface within its distanceFactor() of that side times it; so the reach is taken at the
+    // tolerance over the largest factor (childLeadFactor(), docs/method.md#true-distances).
     // Elsewhere, the smooth iteration on the blended field. A non-uniformly scaled capped
     // cylinder in a blend: its rims (edges, where the iteration cannot converge) far from the
     // other child get the scaled shape's own foot points.
     const std::size_t nc = mChildren.size();
-    double factor = 1.0;
-    for (const auto& c : mChildren) factor = std::max(factor, c->distanceFactor());
-    const double lead = mKernel.reach(query.tolerance / factor) + mKernel.swell(nc);
+    const double lead = mKernel.reach(query.tolerance / childLeadFactor()) + mKernel.swell(nc);
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
     auto termSign = [this](std::size_t c) {
         return mOp == Op::Difference && c > 0 ? -1.0 : 1.0;

@@ -395,9 +395,9 @@ double Transform::uniformScale() const
     return mScale[0] == mScale[1] && mScale[1] == mScale[2] ? mScale[0] : 0.0;
 }
 
-double Transform::distanceFactor() const
+double Transform::distanceFactor(bool outside) const
 {
-    const double k = mChild->distanceFactor();
+    const double k = mChild->distanceFactor(outside);
     if (uniformScale() > 0.0) return k;
     return k * std::max({mScale[0], mScale[1], mScale[2]}) / mValueScale;
 }

@@ -139,8 +139,12 @@ private:
     bool valuesFromRows(const double* terms, std::size_t n, double* values, double* w) const;
     /// True if the foot points can use the lead rule: every child an exact SDF, at most 64.
     bool leadRuleApplies() const;
-    /// True if they can use it with the children's own distances: every child 1-Lipschitz
-    /// with a finite distanceFactor(), at most 64.
+    /// The largest of the children's distanceFactor() on the side where their term is
+    /// positive (outside for a union's children and a difference's subtracted ones, inside
+    /// otherwise); infinity if a child is not 1-Lipschitz.
+    double childLeadFactor() const;
+    /// True if the foot points can use the lead rule with the children's own distances: a
+    /// finite childLeadFactor(), at most 64 children.
     bool childLeadApplies() const;
     /// footPoints() by the lead rule with the deciding child's own foot points (where
     /// childLeadApplies()), the smooth iteration elsewhere.

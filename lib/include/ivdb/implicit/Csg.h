@@ -40,6 +40,9 @@ public:
     bool isDistanceBound() const override;
     /// The children's largest (min and max change no faster than their fastest argument).
     double lipschitzBound() const override;
+    /// 1 outside a union, inside an intersection or a difference, where the children's are 1
+    /// (a difference's subtracted children's outside); infinity elsewhere.
+    double distanceFactor(bool outside) const override;
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override;
 
@@ -114,7 +117,7 @@ public:
     /// The child's: min(scale) times the child's rate along a move of at most 1 / min(scale).
     double lipschitzBound() const override { return mChild->lipschitzBound(); }
     /// The child's, times max(scale) / min(scale) for a non-uniform scale.
-    double distanceFactor() const override;
+    double distanceFactor(bool outside) const override;
     /// The surface footPoints() answers for a non-uniform scale, where that is a world quadric
     /// or an exact SDF (a box moved rigidly).
     Ptr sameSurface() const override;

@@ -128,14 +128,17 @@ public:
     /// whose interpolation between them can change faster. The rasterizer skips a group of
     /// voxels from the value at its centre only by this bound.
     virtual double lipschitzBound() const { return 1.0; }
-    /// @brief A factor K such that every point lies within K |value()| of the surface: 1 for
-    /// exact SDFs; K max(scale) / min(scale) for a non-uniform scale of a child with factor K
-    /// (the scaled field is min(scale) times the child's, and a local distance grows by at most
-    /// max(scale)); a rigid motion or uniform scale keeps the child's. Infinity where none is
-    /// known. A blend takes a child's own distances where that child leads the others far
-    /// enough, by a margin that grows with K (Blend::footPoints).
-    virtual double distanceFactor() const
+    /// @brief A factor K such that every point where value() is positive (@a outside) or
+    /// negative (else) lies within K |value()| of the surface: 1 for exact SDFs, for a union's
+    /// outside and an intersection's or difference's inside where their children's are 1 (the
+    /// min or max is then the distance there); K max(scale) / min(scale) for a non-uniform
+    /// scale of a child with factor K (the scaled field is min(scale) times the child's, and a
+    /// local distance grows by at most max(scale)); a rigid motion or uniform scale keeps the
+    /// child's. Infinity where none is known. A blend takes a child's own distances where that
+    /// child leads the others far enough, by a margin that grows with K (Blend::footPoints).
+    virtual double distanceFactor(bool outside) const
     {
+        (void)outside;
         return isExactSdf() ? 1.0 : std::numeric_limits<double>::infinity();
     }
     /// @brief A shape with this one's surface and sign whose true distances are found more
