@@ -63,6 +63,18 @@ inline bool roundConverged2(double off, double tangential2, double dist2, double
 /// past a singular point, where the local answer cannot be trusted.
 constexpr double kEstimateAgreement = 0.25;
 
+/// refineFootPoint()'s smooth iteration: the rounds of Implicit::footPoints from @a start.
+bool smoothRefine(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q);
+/// The foot point of @a p near @a start by Newton's method on the conditions for a nearest
+/// point (q - p + lambda grad f(q) = 0 and f(q) = 0), the Hessian of f from central
+/// differences of its gradient, each step at most half the distance: it converges where the
+/// surface curves tightly for the distance (kappa d > 1, a blend's rounded edge), where the
+/// smooth iteration's rounds grow the error by kappa d each. Certified as the smooth iteration
+/// is (on the surface, the point on its normal, within @a tol), and only at a nearest point
+/// along the surface (the distance's second derivative along the tangent plane not negative).
+bool newtonFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol,
+                     Vec3d& q);
+
 double dot(const Vec3d& a, const Vec3d& b) { return a.dot(b); }
 
 /// Foot points of an exact SDF: its value, and the point moved back along its unit gradient.
@@ -258,7 +270,120 @@ void detail::smoothFootPoints(const Implicit& f, const double* x, const double* 
 #pragma GCC diagnostic pop
 #endif
 
+namespace {
+
+/// Solve the 4x4 system @a a x = @a b in place (Gaussian elimination with partial pivoting);
+/// false if it is singular.
+bool solve4(double a[4][4], double b[4])
+{
+    for (int c = 0; c < 4; ++c) {
+        int pivot = c;
+        for (int r = c + 1; r < 4; ++r) {
+            if (std::abs(a[r][c]) > std::abs(a[pivot][c])) pivot = r;
+        }
+        if (!(std::abs(a[pivot][c]) > 0.0)) return false;
+        if (pivot != c) {
+            for (int k = 0; k < 4; ++k) std::swap(a[c][k], a[pivot][k]);
+            std::swap(b[c], b[pivot]);
+        }
+        for (int r = c + 1; r < 4; ++r) {
+            const double m = a[r][c] / a[c][c];
+            for (int k = c; k < 4; ++k) a[r][k] -= m * a[c][k];
+            b[r] -= m * b[c];
+        }
+    }
+    for (int c = 3; c >= 0; --c) {
+        for (int k = c + 1; k < 4; ++k) b[c] -= a[c][k] * b[k];
+        b[c] /= a[c][c];
+    }
+    return std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2]) &&
+           std::isfinite(b[3]);
+}
+
+} // namespace
+
+namespace {
+
+bool newtonFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
+{
+    // Unknowns q and lambda; conditions q - p + lambda grad f(q) = 0 and f(q) = 0; Jacobian
+    // [[I + lambda H, g], [g^T, 0]], H from central differences of the analytic gradient.
+    constexpr int kMaxNewtonRounds = 30;
+    q = start;
+    const double scale = std::max((p - start).length(), tol);
+    const double h = 1e-4 * scale;
+    double lambda = 0.0;
+    for (int round = 0; round < kMaxNewtonRounds; ++round) {
+        const double v = f.value(q);
+        const Vec3d g = f.gradient(q);
+        const double g2 = g.lengthSqr();
+        if (!(g2 > 0.0) || !std::isfinite(g2) || !std::isfinite(v)) return false;
+        if (round == 0) lambda = dot(p - q, g) / g2;
+        const double gl = std::sqrt(g2);
+        const Vec3d r = p - q, nrm = g / gl;
+        const double off = std::abs(v) / gl, tangential = (r - nrm * dot(r, nrm)).length();
+        double hess[3][3];
+        for (int k = 0; k < 3; ++k) {
+            Vec3d e(0.0);
+            e[k] = h;
+            const Vec3d d = (f.gradient(q + e) - f.gradient(q - e)) / (2.0 * h);
+            for (int i = 0; i < 3; ++i) hess[i][k] = d[i];
+        }
+        for (int i = 0; i < 3; ++i) {
+            for (int k = i + 1; k < 3; ++k) hess[i][k] = hess[k][i] = 0.5 * (hess[i][k] + hess[k][i]);
+        }
+        const bool converged = roundConverged(off, tangential, r.length(), kConverged * tol);
+        if (converged || round + 1 == kMaxNewtonRounds) {
+            if (!(off <= tol && tangential <= tol)) return false;
+            // A nearest point, not a farthest or a saddle: I + lambda H is not negative along
+            // the tangent plane (the distance has a minimum there along the surface).
+            const Vec3d t1 = nrm.cross(std::abs(nrm[0]) < 0.9 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0)).unit();
+            const Vec3d t2 = nrm.cross(t1);
+            auto form = [&](const Vec3d& a, const Vec3d& b) {
+                double sum = dot(a, b);
+                for (int i = 0; i < 3; ++i) {
+                    for (int k = 0; k < 3; ++k) sum += lambda * a[i] * hess[i][k] * b[k];
+                }
+                return sum;
+            };
+            const double m11 = form(t1, t1), m22 = form(t2, t2), m12 = form(t1, t2);
+            return m11 >= -1e-9 && m22 >= -1e-9 && m11 * m22 - m12 * m12 >= -1e-9;
+        }
+        double a[4][4], b[4];
+        for (int i = 0; i < 3; ++i) {
+            for (int k = 0; k < 3; ++k) a[i][k] = (i == k ? 1.0 : 0.0) + lambda * hess[i][k];
+            a[i][3] = g[i];
+            a[3][i] = g[i];
+            b[i] = -(q[i] - p[i] + lambda * g[i]);
+        }
+        a[3][3] = 0.0;
+        b[3] = -v;
+        if (!solve4(a, b)) return false;
+        Vec3d step(b[0], b[1], b[2]);
+        // No step longer than half the distance: the Newton step of a poor start can leave
+        // the part of the surface it was near.
+        const double most = 0.5 * std::max(r.length(), tol);
+        const double len = step.length();
+        const double damp = len > most ? most / len : 1.0;
+        q += step * damp;
+        lambda += b[3] * damp;
+    }
+    return false;
+}
+
+} // namespace
+
 bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
+{
+    if (smoothRefine(f, p, start, tol, q)) return true;
+    // Where the surface curves tightly for the distance (kappa d > 1: a blend's rounded edge)
+    // the rounds grow the error; Newton's method on the nearest point's conditions converges.
+    return newtonFootPoint(f, p, start, tol, q);
+}
+
+namespace {
+
+bool smoothRefine(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
 {
     q = start;
     for (int round = 0; round < kMaxRounds; ++round) {
@@ -277,6 +402,8 @@ bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, doub
     }
     return false;
 }
+
+} // namespace
 
 namespace {
 
