@@ -373,9 +373,11 @@ bool newtonFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, doub
 
 } // namespace
 
-bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
+bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q,
+                     bool newton)
 {
     if (smoothRefine(f, p, start, tol, q)) return true;
+    if (!newton) return false;
     // Where the surface curves tightly for the distance (kappa d > 1: a blend's rounded edge)
     // the rounds grow the error; Newton's method on the nearest point's conditions converges.
     return newtonFootPoint(f, p, start, tol, q);

@@ -161,8 +161,9 @@ public:
 /// the projection of @a p; where that does not converge (a surface that curves tightly for the
 /// distance, kappa d > 1: a blend's rounded edge), by Newton's method on the nearest point's
 /// conditions (q - p + lambda grad f(q) = 0, f(q) = 0; the Hessian from differences of the
-/// gradient), certified only at a nearest point along the surface.
+/// gradient), certified only at a nearest point along the surface, unless @a newton is false.
 /// @return true, with @a q, if certified: q on the surface and p on its normal within @a tol
-bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q);
+bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q,
+                     bool newton = true);
 
 } // namespace ivdb::implicit
