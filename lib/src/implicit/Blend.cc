@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace ivdb::implicit {
@@ -232,6 +233,15 @@ Blend::Blend(Op op, const BlendKernel& kernel, std::vector<Ptr> children)
     if (mChildren.empty()) OPENVDB_THROW(openvdb::ValueError, "blend needs children");
     for (const auto& c : mChildren) {
         if (!c) OPENVDB_THROW(openvdb::ValueError, "blend has a null child");
+    }
+    // A term rho s_c f_c just above 0 lies on child c's positive side where rho s_c > 0.
+    mChildLeadFactor = 1.0;
+    for (std::size_t c = 0; c < mChildren.size(); ++c) {
+        const bool flip = (mOp != Op::Union) != (mOp == Op::Difference && c > 0);
+        mChildLeadFactor = mChildren[c]->isDistanceBound()
+            ? std::max(mChildLeadFactor, mChildren[c]->distanceFactor(!flip))
+            : std::numeric_limits<double>::infinity();
+        if (!std::isfinite(mChildLeadFactor)) break;
     }
 }
 

@@ -63,18 +63,6 @@ inline bool roundConverged2(double off, double tangential2, double dist2, double
 /// past a singular point, where the local answer cannot be trusted.
 constexpr double kEstimateAgreement = 0.25;
 
-/// refineFootPoint()'s smooth iteration: the rounds of Implicit::footPoints from @a start.
-bool smoothRefine(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q);
-/// The foot point of @a p near @a start by Newton's method on the conditions for a nearest
-/// point (q - p + lambda grad f(q) = 0 and f(q) = 0), the Hessian of f from central
-/// differences of its gradient, each step at most half the distance: it converges where the
-/// surface curves tightly for the distance (kappa d > 1, a blend's rounded edge), where the
-/// smooth iteration's rounds grow the error by kappa d each. Certified as the smooth iteration
-/// is (on the surface, the point on its normal, within @a tol), and only at a nearest point
-/// along the surface (the distance's second derivative along the tangent plane not negative).
-bool newtonFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol,
-                     Vec3d& q);
-
 double dot(const Vec3d& a, const Vec3d& b) { return a.dot(b); }
 
 /// Foot points of an exact SDF: its value, and the point moved back along its unit gradient.
@@ -300,10 +288,34 @@ bool solve4(double a[4][4], double b[4])
            std::isfinite(b[3]);
 }
 
-} // namespace
+/// refineFootPoint()'s smooth iteration: the rounds of Implicit::footPoints from @a start.
+bool smoothRefine(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
+{
+    q = start;
+    for (int round = 0; round < kMaxRounds; ++round) {
+        const double v = f.value(q);
+        const Vec3d h = f.gradient(q);
+        const double h2 = h.lengthSqr();
+        if (!(h2 > 0.0) || !std::isfinite(h2)) return false;
+        const double hl = std::sqrt(h2);
+        const Vec3d r = p - q, nrm = h / hl;
+        const double off = std::abs(v) / hl, tangential = (r - nrm * dot(r, nrm)).length();
+        if (roundConverged(off, tangential, r.length(), kConverged * tol)) return true;
+        if (round + 1 == kMaxRounds) return off <= tol && tangential <= tol;
+        q -= h * (v / h2);
+        const Vec3d t = p - q;
+        q += t - h * (dot(t, h) / h2);
+    }
+    return false;
+}
 
-namespace {
-
+/// The foot point of @a p near @a start by Newton's method on the conditions for a nearest
+/// point (q - p + lambda grad f(q) = 0 and f(q) = 0), the Hessian of f from central
+/// differences of its gradient, each step at most half the distance: it converges where the
+/// surface curves tightly for the distance (kappa d > 1, a blend's rounded edge), where the
+/// smooth iteration's rounds grow the error by kappa d each. Certified as the smooth iteration
+/// is (on the surface, the point on its normal, within @a tol), and only at a nearest point
+/// along the surface (the distance's second derivative along the tangent plane not negative).
 bool newtonFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
 {
     // Unknowns q and lambda; conditions q - p + lambda grad f(q) = 0 and f(q) = 0; Jacobian
@@ -382,30 +394,6 @@ bool refineFootPoint(const Implicit& f, const Vec3d& p, const Vec3d& start, doub
     // the rounds grow the error; Newton's method on the nearest point's conditions converges.
     return newtonFootPoint(f, p, start, tol, q);
 }
-
-namespace {
-
-bool smoothRefine(const Implicit& f, const Vec3d& p, const Vec3d& start, double tol, Vec3d& q)
-{
-    q = start;
-    for (int round = 0; round < kMaxRounds; ++round) {
-        const double v = f.value(q);
-        const Vec3d h = f.gradient(q);
-        const double h2 = h.lengthSqr();
-        if (!(h2 > 0.0) || !std::isfinite(h2)) return false;
-        const double hl = std::sqrt(h2);
-        const Vec3d r = p - q, nrm = h / hl;
-        const double off = std::abs(v) / hl, tangential = (r - nrm * dot(r, nrm)).length();
-        if (roundConverged(off, tangential, r.length(), kConverged * tol)) return true;
-        if (round + 1 == kMaxRounds) return off <= tol && tangential <= tol;
-        q -= h * (v / h2);
-        const Vec3d t = p - q;
-        q += t - h * (dot(t, h) / h2);
-    }
-    return false;
-}
-
-} // namespace
 
 namespace {
 
@@ -1698,22 +1686,23 @@ bool Blend::leadRuleApplies() const
     return true;
 }
 
-double Blend::childLeadFactor() const
+namespace {
+
+/// The least term rho t_c of a blend's @a nc rows of @a n terms at point @a i (@a first, of
+/// child @a decider) and the next (@a second): the lead rule's two terms.
+void leadingTerms(const double* terms, std::size_t nc, std::size_t n, std::size_t i, double rho,
+                  double& first, double& second, std::size_t& decider)
 {
-    // A term rho s_c f_c just above 0: child c's positive side where rho s_c > 0.
-    double factor = 1.0;
-    for (std::size_t c = 0; c < mChildren.size(); ++c) {
-        const bool flip = (mOp != Op::Union) != (mOp == Op::Difference && c > 0);
-        if (!mChildren[c]->isDistanceBound()) return std::numeric_limits<double>::infinity();
-        factor = std::max(factor, mChildren[c]->distanceFactor(!flip));
+    first = second = std::numeric_limits<double>::max();
+    decider = 0;
+    for (std::size_t c = 0; c < nc; ++c) {
+        const double u = rho * terms[c * n + i]; // the child's distance in term form
+        if (u < first) second = first, first = u, decider = c;
+        else if (u < second) second = u;
     }
-    return factor;
 }
 
-bool Blend::childLeadApplies() const
-{
-    return mChildren.size() <= 64 && std::isfinite(childLeadFactor());
-}
+} // namespace
 
 void Blend::childLeadFootPoints(const double* x, const double* y, const double* z,
                                 const double* values, std::size_t n, const FootQuery& query,
@@ -1725,12 +1714,12 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
     // lies where the blend is the deciding child within the blend's value tolerance, on the
     // side of the child where its term is positive, and a value that small puts the child's
     // surface within its distanceFactor() of that side times it; so the reach is taken at the
-    // tolerance over the largest factor (childLeadFactor(), docs/method.md#true-distances).
+    // tolerance over the largest factor (mChildLeadFactor, docs/method.md#true-distances).
     // Elsewhere, the smooth iteration on the blended field. A non-uniformly scaled capped
     // cylinder in a blend: its rims (edges, where the iteration cannot converge) far from the
     // other child get the scaled shape's own foot points.
     const std::size_t nc = mChildren.size();
-    const double lead = mKernel.reach(query.tolerance / childLeadFactor()) + mKernel.swell(nc);
+    const double lead = mKernel.reach(query.tolerance / mChildLeadFactor) + mKernel.swell(nc);
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
     auto termSign = [this](std::size_t c) {
         return mOp == Op::Difference && c > 0 ? -1.0 : 1.0;
@@ -1742,14 +1731,8 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
     double second[kMaxBatch];
     bool candidate[kMaxBatch];
     for (std::size_t i = 0; i < n; ++i) {
-        double first = std::numeric_limits<double>::max();
-        second[i] = first;
-        decider[i] = 0;
-        for (std::size_t c = 0; c < nc; ++c) {
-            const double u = rho * terms[c * n + i];
-            if (u < first) second[i] = first, first = u, decider[i] = c;
-            else if (u < second[i]) second[i] = u;
-        }
+        double first;
+        leadingTerms(terms, nc, n, i, rho, first, second[i], decider[i]);
         out.ok[i] = std::abs(values[i]) >= query.far; // 1-Lipschitz: that far at least
         out.distance[i] = values[i];
         out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
@@ -1786,10 +1769,12 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
 void Blend::footPoints(const double* x, const double* y, const double* z, const double* values,
                        std::size_t n, const FootQuery& query, FootPoints& out) const
 {
-    if (!leadRuleApplies() && childLeadApplies()) {
-        return childLeadFootPoints(x, y, z, values, n, query, out);
+    if (!leadRuleApplies()) {
+        if (std::isfinite(mChildLeadFactor)) {
+            return childLeadFootPoints(x, y, z, values, n, query, out);
+        }
+        return Implicit::footPoints(x, y, z, values, n, query, out);
     }
-    if (!leadRuleApplies()) return Implicit::footPoints(x, y, z, values, n, query, out);
     // With foot points asked for, the children's values and gradients once, for the lead rule
     // (the deciding child's gradient) and for the smooth iteration's start (the blend's
     // gradient from them). Without, the values alone: the points the lead and far rules
@@ -1841,12 +1826,8 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
     bool led[kMaxBatch];
     bool anyBlended = false;
     for (std::size_t i = 0; i < n; ++i) {
-        double first = std::numeric_limits<double>::max(), second = first;
-        for (std::size_t c = 0; c < nc; ++c) {
-            const double u = rho * terms[c * n + i]; // the child's distance in term form
-            if (u < first) second = first, first = u, decider[i] = c;
-            else if (u < second) second = u;
-        }
+        double first, second;
+        leadingTerms(terms, nc, n, i, rho, first, second, decider[i]);
         led[i] = leadKeepsDistance(first, second, lead);
         out.ok[i] = led[i] || std::abs(values[i]) >= query.far;
         anyBlended = anyBlended || !out.ok[i];

@@ -139,15 +139,8 @@ private:
     bool valuesFromRows(const double* terms, std::size_t n, double* values, double* w) const;
     /// True if the foot points can use the lead rule: every child an exact SDF, at most 64.
     bool leadRuleApplies() const;
-    /// The largest of the children's distanceFactor() on the side where their term is
-    /// positive (outside for a union's children and a difference's subtracted ones, inside
-    /// otherwise); infinity if a child is not 1-Lipschitz.
-    double childLeadFactor() const;
-    /// True if the foot points can use the lead rule with the children's own distances: a
-    /// finite childLeadFactor(), at most 64 children.
-    bool childLeadApplies() const;
     /// footPoints() by the lead rule with the deciding child's own foot points (where
-    /// childLeadApplies()), the smooth iteration elsewhere.
+    /// mChildLeadFactor is finite), the smooth iteration elsewhere.
     void childLeadFootPoints(const double* x, const double* y, const double* z,
                              const double* values, std::size_t n, const FootQuery& query,
                              FootPoints& out) const;
@@ -162,6 +155,10 @@ private:
     Op mOp;
     BlendKernel mKernel;
     std::vector<Ptr> mChildren;
+    /// The largest of the children's distanceFactor() on the side where their term is positive
+    /// (outside for a union's children and a difference's subtracted ones, inside otherwise);
+    /// infinity if a child is not 1-Lipschitz or has none: childLeadFootPoints()' margin.
+    double mChildLeadFactor = 1.0;
 };
 
 } // namespace ivdb::implicit
