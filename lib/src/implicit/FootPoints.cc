@@ -184,6 +184,18 @@ void Implicit::footPoints(const double* x, const double* y, const double* z,
         exactFootPoints(*this, x, y, z, values, n, out);
         return;
     }
+    if (isDistanceBound()) {
+        // |f| never exceeds the distance: a point with |f| >= far is that far at least, which
+        // is all that is asked there, without iterating (a shrunk rounded box scaled
+        // non-uniformly, in a shell's inner surface, failed to converge from 3.8 voxels).
+        for (std::size_t i = 0; i < n; ++i) {
+            out.ok[i] = std::abs(values[i]) >= query.far;
+            out.distance[i] = values[i];
+            out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
+        }
+        detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+        return;
+    }
     double gx[kMaxBatch], gy[kMaxBatch], gz[kMaxBatch];
     gradients(x, y, z, gx, gy, gz, n);
     detail::smoothFootPoints(*this, x, y, z, values, gx, gy, gz, n, query, out);
@@ -412,6 +424,9 @@ struct Piece
     /// The value is a convex function: a plane's, a side's (the distance from the axis is), a
     /// convex solid's exact SDF.
     bool convex = false;
+    /// Whole: one child of a term of several pieces (a world quadric in a CSG term), whose
+    /// points count only where they lie on the term's surface, as a plane's or a side's do.
+    bool part = false;
 
     /// Of a side, the signed distance to its line in the half-plane through the axis (the
     /// distance to the cone near it, away from the apex).
@@ -514,11 +529,37 @@ bool pieceParts(const Implicit& f, std::vector<Piece>& out)
     if (const auto* t = dynamic_cast<const Transform*>(&f)) {
         const double s = t->uniformScale();
         if (!(s > 0.0) || !pieceParts(*t->child(), out)) return false;
-        for (std::size_t k = before; k < out.size(); ++k) out[k].move(*t, s);
+        for (std::size_t k = before; k < out.size(); ++k) {
+            if (out[k].kind == Piece::Kind::Whole) { // a quadric: not moved here
+                out.resize(before);
+                return false;
+            }
+            out[k].move(*t, s);
+        }
         return true;
     }
     if (const auto* csg = dynamic_cast<const Csg*>(&f)) {
         for (const auto& child : csg->children()) {
+            // A quadric within a CSG (a non-uniformly scaled capped cone's world quadric
+            // between its cap planes, a sheared box's face planes): a unit-normal plane is a
+            // plane piece; another quadric a piece of its own, iterated whole. Taken whole, such
+            // a term's crease with another follows its gradient across its rims onto its other
+            // pieces, and stopped at a crease point of its side where the nearest was on a cap.
+            if (const auto* q = dynamic_cast<const Quadric*>(child.get())) {
+                const Mat4& m = q->matrix();
+                Piece piece;
+                if (q->isExactSdf()) {
+                    piece.kind = Piece::Kind::Plane;
+                    piece.convex = true;
+                    piece.n = Vec3d(2.0 * m[0][3], 2.0 * m[1][3], 2.0 * m[2][3]);
+                    piece.offset = -m[3][3];
+                } else {
+                    piece.f = q;
+                    piece.part = true;
+                }
+                out.push_back(piece);
+                continue;
+            }
             if (!pieceParts(*child, out)) {
                 out.resize(before);
                 return false;
@@ -878,6 +919,8 @@ public:
         return mFeet[c] ? mFeet[c]->distance[i] : value(c)[i];
     }
     bool certified(std::size_t c, std::size_t i) const { return !mFeet[c] || mFeet[c]->ok[i]; }
+    /// Child @a c's value at point @a i.
+    double childValue(std::size_t c, std::size_t i) const { return value(c)[i]; }
 
     /// Child @a c's foot point of point @a i; false where it is not certified.
     bool foot(std::size_t c, std::size_t i, Vec3d& q) const
@@ -1065,6 +1108,24 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
             continue;
         }
         for (const Piece& piece : mParts[c]) {
+            if (piece.kind == Piece::Kind::Whole) {
+                // A quadric part: its own foot point (Quadric::footPoints), a candidate where it
+                // lies on the term's surface, as a plane's is (from inside an elliptic cone the
+                // term's nearest point can be on a cap outside the others, the side's nearer
+                // than any crease); not certified, a candidate may be missing.
+                const double px = p[0], py = p[1], pz = p[2], fv = piece.f->value(p);
+                FootPoints own;
+                FootQuery query = mQuery;
+                query.feet = true;
+                piece.f->footPoints(&px, &py, &pz, &fv, 1, query, own);
+                if (!own.ok[0]) complete = false;
+                const Vec3d q(own.x[0], own.y[0], own.z[0]);
+                const double bound = own.ok[0] ? std::max(dc, std::abs(own.distance[0])) : dc;
+                if (bound >= std::min(best, mQuery.far)) continue;
+                mPieces.push_back({&piece, c, bound, own.ok[0] ? q : mNearFeet[a]});
+                if (own.ok[0] && onTerm(c, q) && outsideOthers(p, q, {c})) offer(q);
+                continue;
+            }
             const double f = piece.value(p), bound = std::max(dc, std::abs(f));
             if (bound >= std::min(best, mQuery.far)) continue;
             const Vec3d q = p - piece.gradient(p) * f;
@@ -1075,10 +1136,13 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
     std::stable_sort(mPieces.begin(), mPieces.end(),
                      [](const NearPiece& l, const NearPiece& r) { return l.bound < r.bound; });
     // A point found on a piece lies on its term's surface: a whole term's by construction, a
-    // plane's or side's where the term's value there is zero (within a face or on its edges).
+    // plane's, side's or quadric part's where the term's value there is zero (within a face or
+    // on its edges).
     auto onPieces = [&](std::initializer_list<const NearPiece*> pieces, const Vec3d& q) {
         for (const NearPiece* e : pieces) {
-            if (e->piece->kind != Piece::Kind::Whole && !onTerm(e->term, q)) return false;
+            if ((e->piece->kind != Piece::Kind::Whole || e->piece->part) && !onTerm(e->term, q)) {
+                return false;
+            }
         }
         return true;
     };
@@ -1099,8 +1163,9 @@ bool CsgTerms::nearestInside(std::size_t i, double u, double& depth, Vec3d& near
             if (crease == Crease::None) continue; // the two surfaces do not meet
             if (crease == Crease::Failed) {
                 // Not found: missing, unless no crease point can be nearer than the best (the
-                // final one, below).
-                failedFloor = std::min(failedFloor, floor);
+                // final one, below). A point of it lies on both pieces, as far as either's
+                // bound at least.
+                failedFloor = std::min(failedFloor, std::max({floor, pa.bound, pb.bound}));
                 continue;
             }
             if (onPieces({&pa, &pb}, q) && outsideOthers(p, q, {pa.term, pb.term})) offer(q);
@@ -1317,29 +1382,45 @@ void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const
     const double rho = op == Csg::Op::Union ? 1.0 : -1.0;
     // The deciding term (by distance) u, its index and the next, second; whether all are
     // certified. Exact children without foot points asked: the least two in vectorized passes.
+    // allOk: every term certified; bounded: the deciding term certified, and every other
+    // certified or bounded below by its value (a 1-Lipschitz child's positive term: its
+    // distance is at least its value), which is all the lead rule below needs of it.
     double u[kMaxBatch], second[kMaxBatch];
     std::size_t first[kMaxBatch];
-    bool allOk[kMaxBatch];
+    bool allOk[kMaxBatch], bounded[kMaxBatch];
     if (terms.allExact() && !query.feet) {
         terms.firstTwo(n, u, second);
         std::fill(allOk, allOk + n, true);
+        std::fill(bounded, bounded + n, true);
     } else {
+        bool lipschitz[64];
+        const std::size_t nc = std::min<std::size_t>(terms.size(), 64);
+        for (std::size_t c = 0; c < nc; ++c) lipschitz[c] = children[c]->isDistanceBound();
         for (std::size_t i = 0; i < n; ++i) {
             first[i] = 0;
-            u[i] = terms.sign(0) * terms.distance(0, i);
+            u[i] = std::numeric_limits<double>::max();
             second[i] = std::numeric_limits<double>::max();
-            allOk[i] = terms.certified(0, i);
-            for (std::size_t c = 1; c < terms.size(); ++c) {
-                const double d = terms.sign(c) * terms.distance(c, i);
-                allOk[i] = allOk[i] && terms.certified(c, i);
+            allOk[i] = bounded[i] = true;
+            bool firstCertified = false;
+            for (std::size_t c = 0; c < terms.size(); ++c) {
+                const bool certified = terms.certified(c, i);
+                double d = terms.sign(c) * terms.distance(c, i);
+                allOk[i] = allOk[i] && certified;
+                if (!certified) {
+                    const double t = terms.sign(c) * terms.childValue(c, i);
+                    if (c < nc && lipschitz[c] && t > 0.0) d = t;
+                    else bounded[i] = false;
+                }
                 if (d < u[i]) {
                     second[i] = u[i];
                     u[i] = d;
                     first[i] = c;
+                    firstCertified = certified;
                 } else if (d < second[i]) {
                     second[i] = d;
                 }
             }
+            bounded[i] = bounded[i] && firstCertified;
         }
     }
     for (std::size_t i = 0; i < n; ++i) {
@@ -1347,14 +1428,18 @@ void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const
         // Outside every term, the nearest term's distance is the distance to the union; inside,
         // so is the deciding term's as long as no other term comes within it (its foot point
         // then lies outside the others: they are 1-Lipschitz). Also beyond the range asked for.
-        if (!allOk[i] || leadKeepsDistance(u[i], second[i], 0.0) || -u[i] >= query.far) {
+        const bool settled = leadKeepsDistance(u[i], second[i], 0.0) || -u[i] >= query.far;
+        out.surface[i] = false;
+        if (!allOk[i] || settled) {
             out.distance[i] = rho * u[i];
-            out.ok[i] = allOk[i];
+            out.ok[i] = bounded[i] && settled;
             if (query.feet && !terms.foot(first[i], i, q)) out.ok[i] = false;
         } else {
             double depth;
             out.ok[i] = terms.nearestInside(i, u[i], depth, q);
             out.distance[i] = rho * -depth;
+            // Not proven the nearest, but found on the surface: at least as near as that.
+            out.surface[i] = !out.ok[i] && depth < query.far;
         }
         out.x[i] = q[0];
         out.y[i] = q[1];
@@ -1455,6 +1540,7 @@ void Csg::footPoints(const double* x, const double* y, const double* z, const do
         const std::size_t i = idx[k];
         out.distance[i] = sub.distance[k];
         out.ok[i] = sub.ok[k];
+        out.surface[i] = sub.surface[k];
         out.x[i] = sub.x[k], out.y[i] = sub.y[k], out.z[i] = sub.z[k];
     }
 }
@@ -1470,10 +1556,10 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
 {
     if (uniformScale() == 0.0 && mSurface) {
         // A non-uniform scale of a sphere, a quadric, a box, a capped cylinder or cone, a CSG
-        // node, or an offset or shell with a shrunk shape (Offset::solid()): the same
-        // surface's foot points (a world quadric's, a rigidly moved box's, the CSG's of a cone's
-        // quadric and cap planes, the CSG's of its children scaled, the shrunk shape's), from
-        // its own values. Of an exact SDF child, a point that surface leaves uncertified (a
+        // node, a blend, or an offset or shell with a shape of its own (Offset::solid()): the
+        // same surface's foot points (a world quadric's, a rigidly moved box's, the CSG's of a
+        // cone's quadric and cap planes, the CSG's or the blend's of its children scaled, the
+        // offset shape's), from its own values. Of an exact SDF child, a point that surface leaves uncertified (a
         // degenerate foot point deep inside) with |f| >= far is that far at least, as below.
         double sv[kMaxBatch];
         mSurface->values(x, y, z, sv, n);
@@ -1489,19 +1575,10 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
     }
     if (uniformScale() == 0.0) {
         // A non-uniform scale is not a rigid motion: the field itself, by the smooth iteration.
-        // Of an exact SDF the field min(scale) child(q) is 1-Lipschitz (q moves by at most
-        // 1 / min(scale) per unit of p), so |f| never exceeds the distance: a point with
-        // |f| >= far is that far at least, which is all that is asked there.
-        if (!mChild->isExactSdf()) {
-            Implicit::footPoints(x, y, z, values, n, query, out);
-            return;
-        }
-        for (std::size_t i = 0; i < n; ++i) {
-            out.ok[i] = std::abs(values[i]) >= query.far;
-            out.distance[i] = values[i];
-            out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
-        }
-        detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+        // Of a 1-Lipschitz child (an exact SDF) the field min(scale) child(q) is 1-Lipschitz (q
+        // moves by at most 1 / min(scale) per unit of p): a point with |f| >= far is that far
+        // at least, without iterating (Implicit::footPoints).
+        Implicit::footPoints(x, y, z, values, n, query, out);
         return;
     }
     // Rigid motion and uniform scale: the child's foot points, mapped.
@@ -1559,6 +1636,7 @@ void detail::iterateUncertified(const Implicit& f, const double* x, const double
         out.distance[i] = sub.distance[k];
         out.x[i] = sub.x[k], out.y[i] = sub.y[k], out.z[i] = sub.z[k];
         out.ok[i] = sub.ok[k];
+        out.surface[i] = false;
     }
 }
 

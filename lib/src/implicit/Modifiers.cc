@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: Apache-2.0
 #include <ivdb/implicit/Modifiers.h>
 
+#include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Primitives.h>
 
@@ -8,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <vector>
@@ -65,6 +67,24 @@ Implicit::Ptr csgLevelShape(const Csg& c, double level)
     return std::make_shared<Csg>(c.op(), std::move(parts));
 }
 
+/// The solid {f <= level} of a blend's value f as a blend itself: both kernels move with
+/// their terms (a blend of the terms t - l is the blend of t, less l), so it is the same blend
+/// of its children offset by the level (the ones a difference subtracts, by minus it). The
+/// same values, not only the same surface (a blend's surface depends on its children's
+/// values): so each child is its Offset, whose foot points are its own solid's where one is
+/// known (a box's smaller box, a grown CSG's parts), and not that solid itself. The blend's
+/// lead rule then takes a child's own foot points where it leads (Blend::footPoints).
+Implicit::Ptr blendLevelShape(const Blend& b, double level)
+{
+    std::vector<Implicit::Ptr> parts;
+    parts.reserve(b.children().size());
+    for (std::size_t k = 0; k < b.children().size(); ++k) {
+        const bool cut = b.op() == CsgOp::Difference && k > 0;
+        parts.push_back(std::make_shared<Offset>(b.children()[k], cut ? -level : level));
+    }
+    return std::make_shared<Blend>(b.op(), b.kernel(), std::move(parts));
+}
+
 } // namespace
 
 Implicit::Ptr dilatedShape(const Implicit::Ptr& child, double delta)
@@ -84,6 +104,7 @@ Implicit::Ptr dilatedShape(const Implicit::Ptr& child, double delta)
         return outer ? t->moved(outer) : nullptr;
     }
     if (const auto* c = dynamic_cast<const Csg*>(child.get())) return csgLevelShape(*c, delta);
+    if (const auto* b = dynamic_cast<const Blend*>(child.get())) return blendLevelShape(*b, delta);
     return nullptr;
 }
 
@@ -136,6 +157,7 @@ Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
         return std::make_shared<CappedCone>(a, a + c->axis() * length, ra, rb, c->typeName());
     }
     if (const auto* c = dynamic_cast<const Csg*>(child.get())) return csgLevelShape(*c, -delta);
+    if (const auto* b = dynamic_cast<const Blend*>(child.get())) return blendLevelShape(*b, -delta);
     return nullptr;
 }
 
@@ -188,6 +210,15 @@ BBoxd Offset::boundingBoxBelow(double level) const
 }
 
 bool Offset::isExactOutside() const { return mDistance >= 0.0 && mChild->isExactOutside(); }
+
+double Offset::distanceFactor(bool outside) const
+{
+    // Of an exact SDF f, f - d is the distance outside the grown shape (d >= 0) and inside the
+    // shrunk one (d <= 0): there the segment to the child's foot point crosses the level set
+    // after exactly |f - d|, and no point of it is nearer (f is 1-Lipschitz).
+    if (mChild->isExactSdf() && (outside ? mDistance >= 0.0 : mDistance <= 0.0)) return 1.0;
+    return std::numeric_limits<double>::infinity();
+}
 
 Implicit::Ptr Offset::prune(const BBoxd& box) const
 {

@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
+#include <ivdb/implicit/Blend.h>
 #include <ivdb/implicit/Csg.h>
 #include <ivdb/implicit/Modifiers.h>
 #include <ivdb/implicit/Primitives.h>
@@ -10,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <sstream>
 
 namespace ivdb::implicit {
@@ -101,6 +103,112 @@ Implicit::Ptr capPlane(const Mat4& m, const Vec3d& point, const Vec3d& outward)
     return makePlane(n, outward.dot(point - Vec3d(m[0][3], m[1][3], m[2][3])));
 }
 
+/// @a a times @a b.
+Mat4 product(const Mat4& a, const Mat4& b)
+{
+    Mat4 out{};
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) out[i][j] += a[i][k] * b[k][j];
+    return out;
+}
+
+/// Wraps a node in the transforms between the world and it (for a node under nested ones).
+using Wrap = std::function<Implicit::Ptr(const Implicit::Ptr&)>;
+
+/// The world surface and sign of @a node under the affine map @a m (world to node space, [q 1]
+/// = m [p 1]; a transform's within another's, whose composition is no rotation and scale: a
+/// shear) as a shape whose foot points are found directly, or null: a sphere's or quadric's
+/// world quadric, a capped cylinder's or cone's quadric between its cap planes, a box's six
+/// face planes intersected (a parallelepiped), a transform's child under both maps, a CSG
+/// node's children so mapped (each other child @a wrap'ped, as it is: its own field), an
+/// offset's or shell's solid. A blend's values matter, not only its surface: the blend of its
+/// children wrapped, with its kernel rescaled by @a valueScale (the value's factor: the product
+/// of the transforms' min(scale)), as in prepareSurface().
+Implicit::Ptr affineSurface(const Implicit::Ptr& node, const Mat4& m, double valueScale,
+                            const Wrap& wrap)
+{
+    const Implicit* f = node.get();
+    if (const auto* t = dynamic_cast<const Transform*>(f)) {
+        // A transform within another: their composition is an affine map, a shear where the
+        // inner one rotates (no rotation and scale). The smooth iteration on the composed
+        // field, not smooth at a box's edges, certified farther points inside a rotated box
+        // scaled non-uniformly, and left thousands of voxels approximate.
+        const Wrap inner = [&wrap, t](const Implicit::Ptr& k) { return wrap(t->moved(k)); };
+        return affineSurface(t->child(), product(t->localMap(), m),
+                             valueScale * t->valueScale(), inner);
+    }
+    if (const auto* s = dynamic_cast<const Sphere*>(f)) {
+        // |q - c|^2 - r^2: the same surface and sign as the sphere's distance; the world
+        // surface is that of M^T Q M.
+        const Vec3d& c = s->center();
+        const double r = s->radius();
+        const Mat4 local = {{{1.0, 0.0, 0.0, -c[0]},
+                             {0.0, 1.0, 0.0, -c[1]},
+                             {0.0, 0.0, 1.0, -c[2]},
+                             {-c[0], -c[1], -c[2], c.dot(c) - r * r}}};
+        return std::make_shared<Quadric>(mapQuadric(local, m));
+    }
+    if (const auto* q = dynamic_cast<const Quadric*>(f)) {
+        return std::make_shared<Quadric>(mapQuadric(q->matrix(), m));
+    }
+    if (const auto* c = dynamic_cast<const CappedCone*>(f)) {
+        // The solid between the two cap planes within the cone (or cylinder) through the rim
+        // circles: each maps to a surface whose foot points have closed forms (the world
+        // quadric, and planes, exact SDFs), and their intersection's creases (the rims) are
+        // the CSG's. The cone's other nappe lies beyond a cap. The smooth iteration on the
+        // scaled field, not smooth at the rims, answered voxels more than a voxel off. A tip
+        // (a radius of 0) is the quadric's singular point: near it some voxels outside are
+        // still left to the lattice search (docs/method.md).
+        const Vec3d b = c->a() + c->axis() * c->length();
+        return std::make_shared<Csg>(
+            Csg::Op::Intersection,
+            std::vector<Implicit::Ptr>{std::make_shared<Quadric>(mapQuadric(coneQuadric(*c), m)),
+                                       capPlane(m, c->a(), -c->axis()), capPlane(m, b, c->axis())});
+    }
+    if (const auto* b = dynamic_cast<const Box*>(f)) {
+        std::vector<Implicit::Ptr> faces;
+        const Vec3d half = b->size() * 0.5;
+        for (int i = 0; i < 3; ++i) {
+            Vec3d e(0.0);
+            e[i] = 1.0;
+            faces.push_back(capPlane(m, b->center() + e * half[i], e));
+            faces.push_back(capPlane(m, b->center() - e * half[i], -e));
+        }
+        return std::make_shared<Csg>(Csg::Op::Intersection, std::move(faces));
+    }
+    if (const auto* c = dynamic_cast<const Csg*>(f)) {
+        std::vector<Implicit::Ptr> parts;
+        for (const Implicit::Ptr& k : c->children()) {
+            const Implicit::Ptr part = affineSurface(k, m, valueScale, wrap);
+            parts.push_back(part ? part : wrap(k));
+        }
+        return std::make_shared<Csg>(c->op(), std::move(parts));
+    }
+    if (const auto* b = dynamic_cast<const Blend*>(f)) {
+        // Both kernels are homogeneous of degree 1 in the terms and 1/p (or k): s times a
+        // blend of terms t is the blend of the terms s t with p / s (or k s). So the value, s
+        // times the blend of the children's values, is the blend, so rescaled, of the children
+        // transformed: the same field, whose children find their own foot points (a scaled
+        // box's box, a capped cylinder's quadric between its caps) where one leads
+        // (Blend::footPoints), with their distance factors for its lead rule. The smooth
+        // iteration on the scaled field converged at the children's edges and rims to
+        // farther points, and certified some of them.
+        BlendKernel kernel = b->kernel();
+        kernel.p /= valueScale;
+        kernel.k *= valueScale;
+        std::vector<Implicit::Ptr> parts;
+        for (const Implicit::Ptr& k : b->children()) parts.push_back(wrap(k));
+        return std::make_shared<Blend>(b->op(), kernel, std::move(parts));
+    }
+    const auto* offset = dynamic_cast<const Offset*>(f);
+    const auto* shell = dynamic_cast<const Shell*>(f);
+    if (const Implicit::Ptr solid = offset ? offset->solid() : shell ? shell->solid() : nullptr) {
+        return affineSurface(solid, m, valueScale, wrap);
+    }
+    return nullptr;
+}
+
 } // namespace
 
 void Transform::prepareSurface()
@@ -108,13 +216,7 @@ void Transform::prepareSurface()
     // A rigid motion and uniform scale maps the child's own foot points (footPoints()); only a
     // non-uniform scale needs another route.
     if (uniformScale() > 0.0) return;
-    // [q 1] = M [p 1] with M = [[S^-1 R^T, -S^-1 R^T t], [0 0 0 1]].
-    Mat4 m{};
-    for (int i = 0; i < 3; ++i) {
-        for (int j = 0; j < 3; ++j) m[i][j] = mRot[j][i] / mScale[i];
-        m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
-    }
-    m[3][3] = 1.0;
+    const Mat4 m = localMap();
     // An offset or shell with a solid of its own (Offset::solid(): a shrunk box, capped cylinder
     // or cone is a smaller one, a CSG node's is the CSG of its parts offset; Shell::solid(): the
     // difference of a CSG node's solids at t/2 and -t/2): the surface is that solid's, mapped by
@@ -170,46 +272,25 @@ void Transform::prepareSurface()
         mSurface = std::make_shared<Csg>(c->op(), std::move(moved));
         return;
     }
-    if (const auto* c = dynamic_cast<const CappedCone*>(mChild.get())) {
-        // The solid between the two cap planes within the cone (or cylinder) through the rim
-        // circles: each maps to a surface whose foot points have closed forms (the world
-        // quadric, and planes, exact SDFs), and their intersection's creases (the rims) are the
-        // CSG's; its sign and surface are the capped cone's. The cone's other nappe lies beyond
-        // a cap. The smooth iteration on the scaled field, not smooth at the rims, answered
-        // voxels more than a voxel off. A tip (a radius of 0) is the quadric's singular point:
-        // near it some voxels outside are still left to the lattice search (docs/method.md).
-        try {
-            const Vec3d b = c->a() + c->axis() * c->length();
-            mSurface = std::make_shared<Csg>(
-                Csg::Op::Intersection,
-                std::vector<Ptr>{std::make_shared<Quadric>(mapQuadric(coneQuadric(*c), m)),
-                                 capPlane(m, c->a(), -c->axis()),
-                                 capPlane(m, b, c->axis())});
-        } catch (const openvdb::ValueError&) {
-            // Not a usable quadric or plane (an overflow, say): the smooth iteration instead.
-        }
-        return;
-    }
-    Mat4 local;
-    if (const auto* s = dynamic_cast<const Sphere*>(mChild.get())) {
-        // |q - c|^2 - r^2: the same surface and sign as the sphere's distance.
-        const Vec3d& c = s->center();
-        const double r = s->radius();
-        local = {{{1.0, 0.0, 0.0, -c[0]},
-                  {0.0, 1.0, 0.0, -c[1]},
-                  {0.0, 0.0, 1.0, -c[2]},
-                  {-c[0], -c[1], -c[2], c.dot(c) - r * r}}};
-    } else if (const auto* q = dynamic_cast<const Quadric*>(mChild.get())) {
-        local = q->matrix();
-    } else {
-        return;
-    }
+    // Any other child: its surface under the map, where it has a route (affineSurface()).
     try {
-        // The world surface is that of M^T Q M.
-        mSurface = std::make_shared<Quadric>(mapQuadric(local, m));
-    } catch (const openvdb::ValueError&) {
-        // Not a usable quadric (an overflow, say): the smooth iteration instead.
+        mSurface = affineSurface(mChild, m, mValueScale, [this](const Ptr& k) { return moved(k); });
+    } catch (const std::exception&) {
+        // Not a usable quadric or plane (an overflow, say), a sharpness beyond the blend's
+        // limits: the smooth iteration instead.
     }
+}
+
+std::array<std::array<double, 4>, 4> Transform::localMap() const
+{
+    // M = [[S^-1 R^T, -S^-1 R^T t], [0 0 0 1]].
+    Mat4 m{};
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) m[i][j] = mRot[j][i] / mScale[i];
+        m[i][3] = -(m[i][0] * mTranslate[0] + m[i][1] * mTranslate[1] + m[i][2] * mTranslate[2]);
+    }
+    m[3][3] = 1.0;
+    return m;
 }
 
 Vec3d Transform::toLocal(const Vec3d& p) const

@@ -38,6 +38,11 @@ void finishDistances(const implicit::Implicit& f, const openvdb::Coord& origin,
         const int o = offsets[i];
         const openvdb::Coord ijk = origin.offsetBy(o >> 6, (o >> 3) & 7, o & 7);
         out[i] = searchDistance(f, ijk, values[i], s, certified);
+        // A point of the surface the foot points found, though not proven the nearest, bounds
+        // an approximate answer: the lattice's crossings, unrefined, can be farther.
+        if (!certified && feet.surface[i] && std::abs(feet.distance[i]) < std::abs(out[i])) {
+            out[i] = std::copysign(std::abs(feet.distance[i]), out[i]);
+        }
         ++(std::isnan(out[i]) ? counts.unknown : certified ? counts.searched : counts.approximate);
     }
 }

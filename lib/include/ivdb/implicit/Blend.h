@@ -119,6 +119,7 @@ public:
 
     Op op() const { return mOp; }
     const BlendKernel& kernel() const { return mKernel; }
+    const std::vector<Ptr>& children() const { return mChildren; }
     /// The super-elliptic sharpness p (kernel().p).
     double sharpness() const { return mKernel.p; }
 

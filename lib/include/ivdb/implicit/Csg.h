@@ -4,6 +4,7 @@
 #include <ivdb/implicit/CsgOp.h>
 #include <ivdb/implicit/Implicit.h>
 
+#include <array>
 #include <vector>
 
 namespace ivdb::implicit {
@@ -95,7 +96,9 @@ public:
     /// Rigid motion and uniform scale: the child's foot points mapped back. A non-uniform scale
     /// of a sphere or a quadric is a quadric, of a box a box with scaled sides, of a capped
     /// cylinder or cone the intersection of a quadric and two planes, of a CSG node the CSG of
-    /// its children transformed, of an offset or shell with a shrunk shape that shape's (or the
+    /// its children transformed, of a blend the blend of its children transformed (its
+    /// sharpness over min(scale), or its width times it), of an offset or shell with a shrunk
+    /// shape that shape's (or the
     /// difference of the shell's two solids): that surface's foot points (Quadric::footPoints;
     /// the box's, exact, under the rigid motion; Csg::footPoints); of any other child, the
     /// smooth iteration on this node's own field (of an exact SDF, only where |f| < far: the
@@ -126,6 +129,8 @@ public:
 
     /// @brief The child-space point of world point @a p.
     Vec3d toLocal(const Vec3d& p) const;
+    /// @brief toLocal() as a matrix M: [q 1] = M [p 1].
+    std::array<std::array<double, 4>, 4> localMap() const;
     /// @brief The world point of child-space point @a q.
     Vec3d toWorld(const Vec3d& q) const;
     const Ptr& child() const { return mChild; }
@@ -133,6 +138,8 @@ public:
     Ptr moved(Ptr child) const;
     /// @brief The scale, if it is the same along every axis (distances scale by it); else 0.
     double uniformScale() const;
+    /// @brief The factor of the child's value in this node's: the scale, or min(scale).
+    double valueScale() const { return mValueScale; }
 
 private:
     Transform(Ptr child, const Transform& like);
@@ -141,7 +148,8 @@ private:
     /// The rigid motion of @a like (its rotation and translation) with unit scale.
     Transform(Ptr child, const Transform& like, bool rigid);
     /// mSurface, where the scale is not uniform and the child is a sphere, a quadric, a box, a
-    /// capped cylinder or cone, a CSG node, or an offset or shell with a shrunk shape.
+    /// capped cylinder or cone, a CSG node, a blend, or an offset or shell with a shape of its
+    /// own.
     void prepareSurface();
     /// toLocal() of @a n points, into @a qx, @a qy, @a qz.
     void toLocal(const double* x, const double* y, const double* z, std::size_t n, double* qx,
@@ -157,8 +165,8 @@ private:
     /// The same surface, with the same sign, as a shape footPoints() answers directly: a
     /// world-space Quadric (called as an Implicit: its batch functions are target clones), a
     /// rigidly moved Box, the intersection of a cone's world quadric and its caps' planes, or
-    /// the CSG of the children transformed (or of their own such surfaces); null unless
-    /// prepareSurface() made one.
+    /// the CSG of the children transformed (or of their own such surfaces), or the blend of the
+    /// children transformed (the same field); null unless prepareSurface() made one.
     Ptr mSurface;
 };
 

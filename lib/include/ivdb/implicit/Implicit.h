@@ -43,6 +43,10 @@ struct FootPoints
     double distance[kMaxBatch];   ///< signed distance to the surface, negative inside
     double x[kMaxBatch], y[kMaxBatch], z[kMaxBatch]; ///< the foot point (the closest surface point)
     bool ok[kMaxBatch];           ///< certified; false: no local method worked at this point
+    /// Where not ok: true if (x, y, z) is a point of the surface all the same (a CSG's nearest
+    /// candidate where not every candidate could be found), so |distance| is at least as far as
+    /// the true distance; false where nothing is known of it.
+    bool surface[kMaxBatch] = {};
 };
 
 /// @brief An implicit function f: R^3 -> R, negative inside, zero on the surface.
