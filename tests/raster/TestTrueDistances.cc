@@ -1564,39 +1564,47 @@ TEST_F(TestTrueDistances, OffsetOfABlendIsTheBlendOfItsChildrenOffset)
 {
     // Both kernels move with their terms: a blend offset by d is the blend of its children
     // offset by d (a difference's subtracted ones by -d). A box less a sphere by the smooth
-    // minimum (k = 0.1), shrunk by 0.04, on its own and scaled non-uniformly: where the sphere
-    // is at least 0.5 farther than the voxel's distance, the distances are the smaller box's
-    // (scaled along its own axes, a box) in closed form within 1e-3 voxel. Before, the smooth
-    // iteration on the offset field, whose level set has the smaller box's sharp edges,
-    // answered voxels near them up to 0.8 voxel too far.
+    // minimum (k = 0.1), shrunk by 0.04, on its own and scaled non-uniformly, and the box and
+    // the sphere so unioned and shrunk (the shrunk box's value outside it is within sqrt(3) of
+    // its distance, Offset::distanceFactor): where the sphere is at least 0.5 farther than the
+    // voxel's distance, the distances are the smaller box's (scaled along its own axes, a box)
+    // in closed form within 1e-3 voxel. Before, the smooth iteration on the offset field, whose
+    // level set has the smaller box's sharp edges, answered voxels near them up to 1.1 voxels
+    // too far.
     const double dx = 0.01, d = 0.04, margin = 0.5;
     const Vec3d boxCentre(0.02, -0.03, 0.01), boxSize(0.7, 0.5, 0.6), ball(0.35, 0.25, 0.3);
     const auto box = std::make_shared<implicit::Box>(boxCentre, boxSize);
     const auto sphere = std::make_shared<implicit::Sphere>(ball, 0.2);
-    const auto offset = std::make_shared<implicit::Offset>(
-        std::make_shared<implicit::Blend>(implicit::CsgOp::Difference, implicit::BlendKernel::polynomial(0.1),
-                                          std::vector<implicit::Implicit::Ptr>{box, sphere}),
-        -d);
+    auto shrunk = [&](implicit::CsgOp op) {
+        return std::make_shared<implicit::Offset>(
+            std::make_shared<implicit::Blend>(op, implicit::BlendKernel::polynomial(0.1),
+                                              std::vector<implicit::Implicit::Ptr>{box, sphere}),
+            -d);
+    };
     const Vec3d deg(15.0, -10.0, 30.0), scale(1.2, 0.8, 1.1);
-    const auto scaled = std::make_shared<implicit::Transform>(offset, Vec3d(0.0), deg, scale);
-    for (const bool isScaled : {false, true}) {
-        const implicit::Implicit::Ptr shape = isScaled ? implicit::Implicit::Ptr(scaled) : offset;
-        const std::string what = isScaled ? "shrunk smooth difference, scaled" : "shrunk smooth difference";
-        const Vec3d s = isScaled ? scale : Vec3d(1.0);
+    const auto scaled =
+        std::make_shared<implicit::Transform>(shrunk(implicit::CsgOp::Difference), Vec3d(0.0), deg, scale);
+    struct Case { std::string what; implicit::Implicit::Ptr shape; bool scaled; };
+    const Case cases[] = {
+        {"shrunk smooth difference", shrunk(implicit::CsgOp::Difference), false},
+        {"shrunk smooth difference, scaled", scaled, true},
+        {"shrunk smooth union", shrunk(implicit::CsgOp::Union), false}};
+    for (const Case& c : cases) {
+        const Vec3d s = c.scaled ? scale : Vec3d(1.0);
         // The smaller box, in the frame where it is axis-aligned (scaled along its axes).
         auto boxDistance = [&](const Vec3d& p) {
-            const Vec3d q = isScaled ? scaled->toLocal(p) : p;
+            const Vec3d q = c.scaled ? scaled->toLocal(p) : p;
             const Vec3d r((q[0] - boxCentre[0]) * s[0], (q[1] - boxCentre[1]) * s[1], (q[2] - boxCentre[2]) * s[2]);
             const Vec3d half((0.5 * boxSize[0] - d) * s[0], (0.5 * boxSize[1] - d) * s[1], (0.5 * boxSize[2] - d) * s[2]);
             return centredBoxDistance(r, half);
         };
         const implicit::Implicit::Ptr ballField =
-            isScaled ? implicit::Implicit::Ptr(scaled->moved(sphere)) : implicit::Implicit::Ptr(sphere);
+            c.scaled ? implicit::Implicit::Ptr(scaled->moved(sphere)) : implicit::Implicit::Ptr(sphere);
         raster::RasterStats stats;
         raster::RasterSettings rs = settings(dx);
         rs.stats = &stats;
-        const auto g = raster::rasterize(shape, rs);
-        EXPECT_EQ(stats.sweptDistances, 0u) << what;
+        const auto g = raster::rasterize(c.shape, rs);
+        EXPECT_EQ(stats.sweptDistances, 0u) << c.what;
         std::size_t led = 0;
         double worst = 0.0;
         for (auto it = g->cbeginValueOn(); it; ++it) {
@@ -1605,12 +1613,12 @@ TEST_F(TestTrueDistances, OffsetOfABlendIsTheBlendOfItsChildrenOffset)
             ++led;
             const double err = std::abs(double(*it) - boxDistance(p)) / dx;
             worst = std::max(worst, err);
-            EXPECT_LE(err, 1e-3) << what << " at " << p << ": " << *it / dx << " voxels, the "
+            EXPECT_LE(err, 1e-3) << c.what << " at " << p << ": " << *it / dx << " voxels, the "
                                  << "smaller box " << boxDistance(p) / dx;
         }
-        EXPECT_GT(led, 5000u) << what;
+        EXPECT_GT(led, 5000u) << c.what;
         std::printf("%s: %zu voxels the box leads, worst %.2g voxel; %llu local, %llu searched "
-                    "(%llu approximate)\n", what.c_str(), led, worst,
+                    "(%llu approximate)\n", c.what.c_str(), led, worst,
                     (unsigned long long)stats.localDistances,
                     (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
                     (unsigned long long)stats.approximateDistances);

@@ -20,4 +20,8 @@ void smoothFootPoints(const Implicit& f, const double* x, const double* y, const
                       const double* values, const double* gx, const double* gy,
                       const double* gz, std::size_t n, const FootQuery& query, FootPoints& out);
 
+/// @brief True if @a f is the exact SDF of a convex solid (a sphere, box, rounded box, capped
+/// cylinder or cone, moved rigidly or scaled uniformly): its value is a convex function.
+bool convexSdf(const Implicit& f);
+
 } // namespace ivdb::implicit::detail

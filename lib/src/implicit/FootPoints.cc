@@ -464,18 +464,6 @@ struct Piece
     }
 };
 
-/// @a f is the exact SDF of a convex solid (a sphere, box, rounded box, capped cylinder or cone,
-/// moved rigidly or scaled uniformly): its value is a convex function.
-bool convexSdf(const Implicit& f)
-{
-    if (dynamic_cast<const Sphere*>(&f) || dynamic_cast<const Box*>(&f) ||
-        dynamic_cast<const RoundedBox*>(&f) || dynamic_cast<const CappedCone*>(&f)) {
-        return true;
-    }
-    const auto* t = dynamic_cast<const Transform*>(&f);
-    return t && t->uniformScale() > 0.0 && convexSdf(*t->child());
-}
-
 /// A CSG term with more pieces than this (eight boxes) is searched whole.
 constexpr std::size_t kMaxTermPieces = 48;
 
@@ -877,7 +865,7 @@ public:
         for (std::size_t c = 0; c < children.size(); ++c) {
             mSphere.push_back(dynamic_cast<const Sphere*>(children[c].get()));
             mWhole[c].f = children[c].get();
-            mWhole[c].convex = convexSdf(*children[c]);
+            mWhole[c].convex = detail::convexSdf(*children[c]);
             // Pieces are searched one by one: a term of many (a union of many boxes) is
             // searched whole instead, its crease by the iteration.
             if (!mSphere[c] && pieceParts(*children[c], mParts[c]) &&
@@ -1556,11 +1544,13 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
 {
     if (uniformScale() == 0.0 && mSurface) {
         // A non-uniform scale of a sphere, a quadric, a box, a capped cylinder or cone, a CSG
-        // node, a blend, or an offset or shell with a shape of its own (Offset::solid()): the
-        // same surface's foot points (a world quadric's, a rigidly moved box's, the CSG's of a
-        // cone's quadric and cap planes, the CSG's or the blend's of its children scaled, the
-        // offset shape's), from its own values. Of an exact SDF child, a point that surface leaves uncertified (a
-        // degenerate foot point deep inside) with |f| >= far is that far at least, as below.
+        // node, a blend, a transform, or an offset or shell with a shape of its own
+        // (Offset::solid()): the same surface's foot points (a world quadric's, a rigidly moved
+        // box's, the CSG's of a cone's quadric and cap planes or of a sheared box's planes, the
+        // CSG's or the blend's of its children mapped, the offset shape's), from its own
+        // values. Of an exact SDF child, a point that surface leaves uncertified (a degenerate
+        // foot point deep inside) with |f| >= far is that far at least (the field is
+        // 1-Lipschitz).
         double sv[kMaxBatch];
         mSurface->values(x, y, z, sv, n);
         mSurface->footPoints(x, y, z, sv, n, query, out);
@@ -1605,6 +1595,16 @@ void Transform::footPoints(const double* x, const double* y, const double* z,
 } // namespace ivdb::implicit
 
 namespace ivdb::implicit {
+
+bool detail::convexSdf(const Implicit& f)
+{
+    if (dynamic_cast<const Sphere*>(&f) || dynamic_cast<const Box*>(&f) ||
+        dynamic_cast<const RoundedBox*>(&f) || dynamic_cast<const CappedCone*>(&f)) {
+        return true;
+    }
+    const auto* t = dynamic_cast<const Transform*>(&f);
+    return t && t->uniformScale() > 0.0 && convexSdf(*t->child());
+}
 
 void detail::iterateUncertified(const Implicit& f, const double* x, const double* y,
                                 const double* z, const double* values, std::size_t n,

@@ -7,6 +7,8 @@
 
 #include <openvdb/Exceptions.h>
 
+#include "Feet.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -211,13 +213,44 @@ BBoxd Offset::boundingBoxBelow(double level) const
 
 bool Offset::isExactOutside() const { return mDistance >= 0.0 && mChild->isExactOutside(); }
 
+namespace {
+
+/// Of an exact SDF @a f shrunk by @a delta > 0: a factor K such that every point where
+/// f + delta > 0 lies within K (f + delta) of the shrunk surface {f = -delta}. 1 where f + delta
+/// is the shrunk shape's own exact SDF (a sphere's, a rounded box's by less than its radius);
+/// sqrt(3) for a box (and a rounded box shrunk past its radius, its inner box shrunk): each
+/// coordinate's excess over the smaller box is at most f + delta, so the distance to it at most
+/// sqrt(3) times that; a rigid motion or uniform scale keeps it. Infinity for other shapes.
+double erosionFactor(const Implicit& f, double delta)
+{
+    if (const auto* s = dynamic_cast<const Sphere*>(&f)) {
+        return delta < s->radius() ? 1.0 : std::numeric_limits<double>::infinity();
+    }
+    if (const auto* b = dynamic_cast<const RoundedBox*>(&f)) {
+        return delta < b->radius() ? 1.0 : std::sqrt(3.0);
+    }
+    if (dynamic_cast<const Box*>(&f)) return std::sqrt(3.0);
+    if (const auto* t = dynamic_cast<const Transform*>(&f)) {
+        const double s = t->uniformScale();
+        if (s > 0.0) return erosionFactor(*t->child(), delta / s);
+    }
+    return std::numeric_limits<double>::infinity();
+}
+
+} // namespace
+
 double Offset::distanceFactor(bool outside) const
 {
     // Of an exact SDF f, f - d is the distance outside the grown shape (d >= 0) and inside the
     // shrunk one (d <= 0): there the segment to the child's foot point crosses the level set
-    // after exactly |f - d|, and no point of it is nearer (f is 1-Lipschitz).
-    if (mChild->isExactSdf() && (outside ? mDistance >= 0.0 : mDistance <= 0.0)) return 1.0;
-    return std::numeric_limits<double>::infinity();
+    // after exactly |f - d|, and no point of it is nearer (f is 1-Lipschitz). Inside a convex
+    // solid grown, too: it is a point's distance to the solid, d less it, and the level set
+    // of a 1-Lipschitz function is no nearer. Outside one shrunk: erosionFactor().
+    const double none = std::numeric_limits<double>::infinity();
+    if (!mChild->isExactSdf()) return none;
+    if (outside ? mDistance >= 0.0 : mDistance <= 0.0) return 1.0;
+    if (outside) return erosionFactor(*mChild, -mDistance);
+    return detail::convexSdf(*mChild) ? 1.0 : none;
 }
 
 Implicit::Ptr Offset::prune(const BBoxd& box) const

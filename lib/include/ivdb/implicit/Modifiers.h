@@ -34,8 +34,9 @@ public:
     bool isExactSdf() const override { return false; }
     /// Grown (d >= 0) from a shape exact outside: f - d is the distance outside.
     bool isExactOutside() const override;
-    /// 1 outside a grown exact SDF and inside a shrunk one (f - d is the distance there), else
-    /// infinity.
+    /// Of an exact SDF child: 1 outside it grown and inside it shrunk (f - d is the distance
+    /// there), and inside a convex solid grown; outside a box shrunk sqrt(3) (a sphere's or a
+    /// rounded box's smaller one, 1); else infinity.
     double distanceFactor(bool outside) const override;
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
     double lipschitzBound() const override { return mChild->lipschitzBound(); }
