@@ -118,21 +118,21 @@ class TestMpiRasterize(MpiCase):
         self.same_as_ivdb(data("fig2_ellipsoid.json"), "--voxel-size", "0.02")
         self.same_as_ivdb(data("fig5_blend_union.json"), "--voxel-size", "0.02", ranks=(2, 4))
         self.same_as_ivdb(data("fig2_cylinder.json"), "--voxel-size", "0.04", ranks=(3,))
-        # Wider bands, where the voxels the local search does not reach near the clipping box's
-        # edges are fast-swept together (every rank sweeps all of them and keeps its own), as
-        # plain ivdb sweeps them: 16 of them (on one rank's part), and 72,978 (some leaves left
-        # with none in the band), with a fog volume.
+        # Wider bands, where the voxels the local search does not reach (inside the clipped
+        # paraboloid's bowl, beyond the lattice search's window) are fast-swept together (every
+        # rank sweeps all of them and keeps its own), as plain ivdb sweeps them: 68 of them, and
+        # 11,988 (some leaves left with none in the band), with a fog volume.
         import json
         for options, ranks, least in ((("--voxel-size", "0.04", "--half-width", "5"), (1, 2, 3, 4), 10),
-                                      (("--voxel-size", "0.03", "--half-width", "10", "--fog"), (3,), 10000)):
-            r = ivdb("rasterize", data("fig2_cylinder.json"), "-o", self.path("wide.vdb"), *options)
+                                      (("--voxel-size", "0.03", "--half-width", "10", "--fog"), (3,), 5000)):
+            r = ivdb("rasterize", data("fig2_paraboloid.json"), "-o", self.path("wide.vdb"), *options)
             self.assertEqual(r.returncode, 0, r.stderr)
             swept = int(r.stdout.split("lattice search")[1].split(",")[1].split()[0])
             self.assertGreater(swept, least, r.stdout)
-            self.same_as_ivdb(data("fig2_cylinder.json"), *options, ranks=ranks)
+            self.same_as_ivdb(data("fig2_paraboloid.json"), *options, ranks=ranks)
             if "--fog" in options:
                 continue
-            r = mpi(3, "rasterize", data("fig2_cylinder.json"), "-o", self.path("wide.vdb"),
+            r = mpi(3, "rasterize", data("fig2_paraboloid.json"), "-o", self.path("wide.vdb"),
                     "--json", *options)
             self.assertEqual(r.returncode, 0, r.stderr)
             self.assertEqual(json.loads(r.stdout)["swept_distances"], swept)

@@ -195,11 +195,12 @@ struct EigenQuadric
     }
 
     /// The foot point (q0, q1, q2) for the multiplier @a u of the point (a, b, e), its distance,
-    /// and whether it is certified: on the surface within @a tol, inside (lo, hi), and its
-    /// distance within @a agreement of the first-order estimate @a est.
-    IVDB_CLONE_INLINE bool foot(double a, double b, double e, double u, double est, double tol,
-                                double agreement, double& q0, double& q1, double& q2,
-                                double& dist) const
+    /// and whether it is certified: on the surface within @a tol, inside (lo, hi), its distance
+    /// within @a agreement of the estimate @a est, and at most @a cap (the distance to a point
+    /// of the surface already known) beyond the tolerance.
+    IVDB_CLONE_INLINE bool foot(double a, double b, double e, double u, double est, double cap,
+                                double tol, double agreement, double& q0, double& q1,
+                                double& q2, double& dist) const
     {
         const double e0 = 1.0 + 2.0 * u * d0, e1 = 1.0 + 2.0 * u * d1, e2 = 1.0 + 2.0 * u * d2;
         q0 = (a - 2.0 * u * b0) / e0;
@@ -212,7 +213,7 @@ struct EigenQuadric
         const double r0 = a - q0, r1 = b - q1, r2 = e - q2;
         dist = std::sqrt(r0 * r0 + r1 * r1 + r2 * r2);
         return std::min(e0, std::min(e1, e2)) > 0.0 && glq > 0.0 && std::abs(g) <= tol * glq &&
-               std::abs(dist - est) <= agreement * est + tol;
+               std::abs(dist - est) <= agreement * est + tol && dist <= cap + tol;
     }
 };
 
@@ -240,7 +241,7 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
     double p0[kMaxBatch], p1[kMaxBatch], p2[kMaxBatch], mu[kMaxBatch], step[kMaxBatch];
     // The points in the eigenframe, their gradients and first-order estimates (a loop that
     // vectorizes), then the ones near enough to need the foot point, compacted.
-    double e[kMaxBatch], gl[kMaxBatch];
+    double e[kMaxBatch], gl[kMaxBatch], along[kMaxBatch], cap[kMaxBatch];
     bool near[kMaxBatch];
     const double far = query.far, reach = normA * query.far * query.far;
     for (std::size_t i = 0; i < n; ++i) {
@@ -251,6 +252,16 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
                      g2 = 2.0 * (q.d2 * p2[i] + q.b2);
         gl[i] = std::sqrt(g0 * g0 + g1 * g1 + g2 * g2);
         e[i] = values[i] / gl[i];
+        // The distance along the normal line to where it crosses the surface: f(p + t n) =
+        // f + |grad f| t + (n^T A n) t^2 exactly, its root nearest 0 (a circle's distance
+        // exactly, where f / |grad f| is 25% off a third of the radius inside). A point of the
+        // surface: no foot point is certified beyond it. Where the line does not cross, |e|.
+        const double curve = (q.d0 * g0 * g0 + q.d1 * g1 * g1 + q.d2 * g2 * g2) / (gl[i] * gl[i]);
+        const double disc = gl[i] * gl[i] - 4.0 * curve * values[i];
+        const bool crosses = disc >= 0.0;
+        along[i] = crosses ? 2.0 * std::abs(values[i]) / (gl[i] + std::sqrt(std::max(disc, 0.0)))
+                           : std::abs(e[i]);
+        cap[i] = crosses ? along[i] : std::numeric_limits<double>::infinity();
         const double v = values[i];
         const bool valid = gl[i] > 0.0 && std::isfinite(gl[i]);
         // f(p + h) = f(p) + grad f . h + h^T A h: no surface within far of p if |f| exceeds
@@ -277,7 +288,8 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
         p1[m] = p1[i];
         p2[m] = p2[i];
         mu[m] = mu[i];
-        e[m] = e[i]; // compacted too: read as e[idx[k]] it was a gather, a tenth of the time
+        along[m] = along[i]; // compacted too: read as along[idx[k]] it was a gather, slower
+        cap[m] = cap[i];
         m += near[i] ? 1 : 0;
     }
     for (int round = 0; round < 3; ++round) {
@@ -295,12 +307,13 @@ void Quadric::footPoints(const double* x, const double* y, const double* z, cons
     // The foot points (in the eigenframe), the distances and the certificates: a vectorized loop.
     // On an ellipsoid (A positive definite) g is strictly decreasing where every 1 + 2 mu d_i >
     // 0, and its one root there is the closest point: certified. Other quadrics also check the
-    // distance against the first-order estimate, as the smooth iteration does.
+    // distance against the crossing of the normal line (a point of the surface: never beyond
+    // it), as the smooth iteration does against the first-order estimate.
     double q0[kMaxBatch], q1[kMaxBatch], q2[kMaxBatch], dist[kMaxBatch], good[kMaxBatch];
     const double agreement = q.d0 > 0.0 && q.d1 > 0.0 && q.d2 > 0.0
                                  ? std::numeric_limits<double>::infinity() : 0.25;
     for (std::size_t k = 0; k < m; ++k) {
-        good[k] = q.foot(p0[k], p1[k], p2[k], mu[k], std::abs(e[k]), query.tolerance,
+        good[k] = q.foot(p0[k], p1[k], p2[k], mu[k], along[k], cap[k], query.tolerance,
                          agreement, q0[k], q1[k], q2[k], dist[k]) ? 1.0 : 0.0;
     }
     for (std::size_t k = 0; k < m; ++k) {
