@@ -186,8 +186,8 @@ void Implicit::footPoints(const double* x, const double* y, const double* z,
     }
     if (isDistanceBound()) {
         // |f| never exceeds the distance: a point with |f| >= far is that far at least, which
-        // is all that is asked there, without iterating (a shrunk rounded box scaled
-        // non-uniformly, in a shell's inner surface, failed to converge from 3.8 voxels).
+        // is all that is asked there, without iterating (where the iteration need not
+        // converge: a shrunk rounded box scaled non-uniformly).
         for (std::size_t i = 0; i < n; ++i) {
             out.ok[i] = std::abs(values[i]) >= query.far;
             out.distance[i] = values[i];
@@ -1381,9 +1381,6 @@ void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const
         std::fill(allOk, allOk + n, true);
         std::fill(bounded, bounded + n, true);
     } else {
-        bool lipschitz[64];
-        const std::size_t nc = std::min<std::size_t>(terms.size(), 64);
-        for (std::size_t c = 0; c < nc; ++c) lipschitz[c] = children[c]->isDistanceBound();
         for (std::size_t i = 0; i < n; ++i) {
             first[i] = 0;
             u[i] = std::numeric_limits<double>::max();
@@ -1396,7 +1393,7 @@ void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const
                 allOk[i] = allOk[i] && certified;
                 if (!certified) {
                     const double t = terms.sign(c) * terms.childValue(c, i);
-                    if (c < nc && lipschitz[c] && t > 0.0) d = t;
+                    if (t > 0.0 && children[c]->isDistanceBound()) d = t;
                     else bounded[i] = false;
                 }
                 if (d < u[i]) {
