@@ -40,6 +40,22 @@ BBoxd within(const BBoxd& a, const BBoxd& b)
 
 namespace {
 
+/// A capped cylinder or cone is its (convex) cone between two slabs: shrunk by @a delta, the
+/// caps move in by delta along the axis and the side by delta across it, which at a slope
+/// k = dr/ds takes delta sqrt(1 + k^2) off the radius. Null where the length or a radius would
+/// reach 0 (the shrunk solid nothing, or a cone's tip).
+std::shared_ptr<CappedCone> erodedCone(const CappedCone& c, double delta)
+{
+    const double length = c.length() - 2.0 * delta;
+    if (!(length > 0.0)) return nullptr;
+    const double k = (c.radiusB() - c.radiusA()) / c.length();
+    const double cut = delta * std::sqrt(1.0 + k * k);
+    const double ra = c.radiusA() + k * delta - cut, rb = c.radiusB() - k * delta - cut;
+    if (!(ra > 0.0) || !(rb > 0.0)) return nullptr;
+    const Vec3d a = c.a() + c.axis() * delta;
+    return std::make_shared<CappedCone>(a, a + c.axis() * length, ra, rb, c.typeName());
+}
+
 /// The solid {f <= level} of a CSG node's value f as a CSG node itself: the node's value is the
 /// min or max of its terms, so its level set is the union or intersection of theirs (min(a, b)
 /// <= l where a <= l or b <= l; max(a, b) <= l where both are; max(a, -b) <= l where a <= l and
@@ -144,20 +160,8 @@ Implicit::Ptr erodedShape(const Implicit::Ptr& child, double delta)
         const Implicit::Ptr inner = s > 0.0 ? erodedShape(t->child(), delta / s) : nullptr;
         return inner ? t->moved(inner) : nullptr;
     }
-    // A capped cylinder or cone is its (convex) cone between two slabs: shrunk, the caps move in
-    // by delta along the axis and the side by delta across it, which at a slope k = dr/ds takes
-    // delta sqrt(1 + k^2) off the radius. Where a radius would reach 0 before its cap (the
-    // shrunk solid a cone's tip), none here.
-    if (const auto* c = dynamic_cast<const CappedCone*>(child.get())) {
-        const double length = c->length() - 2.0 * delta;
-        if (!(length > 0.0)) return nullptr;
-        const double k = (c->radiusB() - c->radiusA()) / c->length();
-        const double cut = delta * std::sqrt(1.0 + k * k);
-        const double ra = c->radiusA() + k * delta - cut, rb = c->radiusB() - k * delta - cut;
-        if (!(ra > 0.0) || !(rb > 0.0)) return nullptr;
-        const Vec3d a = c->a() + c->axis() * delta;
-        return std::make_shared<CappedCone>(a, a + c->axis() * length, ra, rb, c->typeName());
-    }
+    // A capped cylinder or cone: the smaller one (erodedCone()), unless it is a cone's tip.
+    if (const auto* c = dynamic_cast<const CappedCone*>(child.get())) return erodedCone(*c, delta);
     if (const auto* c = dynamic_cast<const Csg*>(child.get())) return csgLevelShape(*c, -delta);
     if (const auto* b = dynamic_cast<const Blend*>(child.get())) return blendLevelShape(*b, -delta);
     return nullptr;
@@ -215,9 +219,30 @@ bool Offset::isExactOutside() const { return mDistance >= 0.0 && mChild->isExact
 
 namespace {
 
+/// erosionFactor() of a capped cylinder or cone. It is a solid of revolution, so a point's
+/// nearest point of it, or of the smaller one (erodedShape(): the caps moved in by delta and
+/// the side by delta across it), lies in the point's half-plane through the axis, where the
+/// solid's section is a trapezoid: the intersection of its caps' and sides' half-planes, f at
+/// least each one's signed distance (the exact distance to a convex intersection, inside and
+/// out). The smaller trapezoid's half-planes are those moved in by delta, so each one's signed
+/// distance is at most f + delta. Where the nearest point of the smaller trapezoid is a corner
+/// of interior angle theta, the point lies in the corner's normal cone (its two edges' normals
+/// pi - theta apart), where the larger of its distances to the two half-planes is at least
+/// sin(theta / 2) times its distance to the corner; on an edge, that edge's distance is the
+/// distance. The smallest angle is at the wide end's rims, pi/2 - atan(|k|) at the slope k =
+/// dr/ds (sqrt(2) for a cylinder). Infinity where the smaller solid is not such a trapezoid (a
+/// radius or the length reaching 0: erodedShape() has none either).
+double cappedConeErosionFactor(const CappedCone& c, double delta)
+{
+    if (!erodedCone(c, delta)) return std::numeric_limits<double>::infinity();
+    const double k = (c.radiusB() - c.radiusA()) / c.length();
+    return 1.0 / std::sin(0.25 * M_PI - 0.5 * std::atan(std::abs(k)));
+}
+
 /// Of an exact SDF @a f shrunk by @a delta > 0: a factor K such that every point where
 /// f + delta > 0 lies within K (f + delta) of the shrunk surface {f = -delta}. 1 where f + delta
-/// is the shrunk shape's own exact SDF (a sphere's, a rounded box's by less than its radius);
+/// is the shrunk shape's own exact SDF (a sphere's, a capsule's, a torus's, a rounded box's by
+/// less than its radius); for a capped cylinder or cone, cappedConeErosionFactor();
 /// sqrt(3) for a box (and a rounded box shrunk past its radius, its inner box shrunk): each
 /// coordinate's excess over the smaller box is at most f + delta, so the distance to it at most
 /// sqrt(3) times that; a rigid motion or uniform scale keeps it. Infinity for other shapes.
@@ -230,6 +255,15 @@ double erosionFactor(const Implicit& f, double delta)
         return delta < b->radius() ? 1.0 : std::sqrt(3.0);
     }
     if (dynamic_cast<const Box*>(&f)) return std::sqrt(3.0);
+    // A capsule or a torus shrunk by less than its radius is the one of the smaller radius:
+    // f + delta is its exact distance.
+    if (const auto* c = dynamic_cast<const Capsule*>(&f)) {
+        return delta < c->radius() ? 1.0 : std::numeric_limits<double>::infinity();
+    }
+    if (const auto* t = dynamic_cast<const Torus*>(&f)) {
+        return delta < t->minorRadius() ? 1.0 : std::numeric_limits<double>::infinity();
+    }
+    if (const auto* c = dynamic_cast<const CappedCone*>(&f)) return cappedConeErosionFactor(*c, delta);
     if (const auto* t = dynamic_cast<const Transform*>(&f)) {
         const double s = t->uniformScale();
         if (s > 0.0) return erosionFactor(*t->child(), delta / s);

@@ -78,6 +78,8 @@ public:
     bool isExactSdf() const override { return true; }
     std::string typeName() const override { return "torus"; }
 
+    double minorRadius() const { return mMinor; }
+
 private:
     Vec3d mCenter;
     double mMajor, mMinor;
@@ -99,6 +101,8 @@ public:
     BBoxd boundingBox() const override;
     bool isExactSdf() const override { return true; }
     std::string typeName() const override { return "capsule"; }
+
+    double radius() const { return mRadius; }
 
 private:
     Vec3d mA, mAb;
