@@ -47,6 +47,95 @@ void finishDistances(const implicit::Implicit& f, const openvdb::Coord& origin,
     }
 }
 
+/// The nearest to @a p of the surface points found on the lattice of step @a h (5 points a
+/// side) centred at @a c: the shape's crossings of the lattice's edges (linear interpolation),
+/// the nearest few bisected along their edges onto the surface (@a halvings times); @a found
+/// false (and @a c) where no edge crosses.
+Vec3d latticeSurfacePoint(const implicit::Implicit& f, const Vec3d& p, const Vec3d& c, double h,
+                          int halvings, bool& found)
+{
+    constexpr int kFine = 5;
+    constexpr int kCount = kFine * kFine * kFine;
+    double px[kCount], py[kCount], pz[kCount], v[kCount];
+    for (int i = 0, m = 0; i < kFine; ++i) {
+        for (int j = 0; j < kFine; ++j) {
+            for (int k = 0; k < kFine; ++k, ++m) {
+                px[m] = c[0] + (i - kFine / 2) * h;
+                py[m] = c[1] + (j - kFine / 2) * h;
+                pz[m] = c[2] + (k - kFine / 2) * h;
+            }
+        }
+    }
+    f.values(px, py, pz, v, kCount);
+    constexpr std::size_t kKeep = 3;
+    struct Edge { double dist; int a, b; };
+    std::array<Edge, kKeep> nearest;
+    nearest.fill({std::numeric_limits<double>::max(), -1, -1});
+    const int stride[3] = {kFine * kFine, kFine, 1};
+    for (int i = 0, m = 0; i < kFine; ++i) {
+        for (int j = 0; j < kFine; ++j) {
+            for (int k = 0; k < kFine; ++k, ++m) {
+                const int at[3] = {i, j, k};
+                for (int d = 0; d < 3; ++d) {
+                    if (at[d] + 1 >= kFine) continue;
+                    const int n = m + stride[d];
+                    if ((v[m] > 0.0) == (v[n] > 0.0)) continue;
+                    const double t = v[m] / (v[m] - v[n]);
+                    const Vec3d x(px[m] + t * (px[n] - px[m]), py[m] + t * (py[n] - py[m]),
+                                  pz[m] + t * (pz[n] - pz[m]));
+                    const double e = (x - p).length();
+                    if (e >= nearest.back().dist) continue;
+                    nearest.back() = {e, m, n};
+                    std::sort(nearest.begin(), nearest.end(),
+                              [](const Edge& l, const Edge& r) { return l.dist < r.dist; });
+                }
+            }
+        }
+    }
+    found = nearest.front().a >= 0;
+    Vec3d best = c;
+    double bestDist = std::numeric_limits<double>::max();
+    for (const Edge& e : nearest) {
+        if (e.a < 0) break;
+        // Bisection between the two ends (of opposite signs).
+        Vec3d lo(px[e.a], py[e.a], pz[e.a]), hi(px[e.b], py[e.b], pz[e.b]);
+        const bool loPositive = v[e.a] > 0.0;
+        for (int it = 0; it < halvings; ++it) {
+            const Vec3d mid = 0.5 * (lo + hi);
+            ((f.value(mid) > 0.0) == loPositive ? lo : hi) = mid;
+        }
+        const Vec3d q = 0.5 * (lo + hi);
+        if ((q - p).length() < bestDist) bestDist = (q - p).length(), best = q;
+    }
+    return best;
+}
+
+/// A point of the surface near the lattice crossing @a c (of an edge whose refinement into a
+/// foot point failed: a crease, a sharp rim, a sliver), the nearest to @a p found, and its
+/// distance: latticeSurfacePoint() in the voxel-sized cube around @a c (steps of a quarter
+/// voxel), then twice in a cube half as large around the best point so far. A point of the
+/// surface (within its bisection's 1e-5 voxel), so never nearer than the surface, and within a few thousandths of a voxel of the
+/// nearest one where that lies in the cube; the crossing @a c itself, interpolated linearly
+/// across a whole voxel where the field is far from linear, was up to 0.82 voxel too far
+/// (TestTrueDistances.ApproximateDistancesAreSurfacePointsNearTheNearest). @a dist (|c - p|)
+/// where no edge crosses.
+double surfacePointNear(const implicit::Implicit& f, const Vec3d& p, const Vec3d& c, double dx,
+                        double dist)
+{
+    Vec3d centre = c;
+    double best = std::numeric_limits<double>::max();
+    // Each stage's bisection ends within 1e-5 voxel of the surface (2^-15 of a quarter voxel),
+    // far below the tolerance, so that no point is nearer than the surface by more.
+    for (int stage = 0; stage < 3; ++stage) {
+        bool found = false;
+        const double h = std::ldexp(0.25 * dx, -stage);
+        const Vec3d q = latticeSurfacePoint(f, p, centre, h, 15 - stage, found);
+        if (!found) break;
+        if ((q - p).length() < best) best = (q - p).length(), centre = q;
+    }
+    return best == std::numeric_limits<double>::max() ? dist : best;
+}
+
 } // namespace
 
 void trueDistances(const implicit::Implicit& f, const openvdb::Coord& origin, const int* offsets,
@@ -126,18 +215,36 @@ double searchDistance(const implicit::Implicit& f, const openvdb::Coord& ijk, do
     // The nearest surface point among the crossings' foot points (the crossing itself where
     // the refinement is not certified: a crease, a singular point).
     double best = std::numeric_limits<double>::max();
-    for (const auto& [dist, c] : nearest) {
+    std::array<bool, kKeep> refined{};
+    for (std::size_t k = 0; k < kKeep; ++k) {
+        const auto& [dist, c] = nearest[k];
         if (dist == std::numeric_limits<double>::max()) break;
         Vec3d q;
         // Newton's method where the rounds fail only for a crossing nearer than the nearest
         // point certified so far (it costs seven gradients a step: a mesh's crossings took
         // most of the knot's compute with it on every crossing).
         const bool newton = !(certified && dist >= best);
-        const bool ok = implicit::refineFootPoint(f, p, c, s.tolerance, q, newton);
-        const double d = ok ? (q - p).length() : dist;
-        if (d < best) {
+        refined[k] = implicit::refineFootPoint(f, p, c, s.tolerance, q, newton);
+        if (refined[k] && (q - p).length() < best) {
+            best = (q - p).length();
+            certified = true;
+        }
+    }
+    // The crossings not refined: a point of the surface near each (surfacePointNear()), for
+    // those nearer than the nearest certified point (else it stands, as it did against the
+    // crossing itself) and less than a voxel farther than the best point so far (the search
+    // moves a crossing by less). A surface point within the tolerance of the certified one is
+    // that point (its bisection leaves it a little off); a nearer one shows the certified
+    // point was not the nearest.
+    const double bestCertified = best;
+    for (std::size_t k = 0; k < kKeep; ++k) {
+        const auto& [dist, c] = nearest[k];
+        if (dist == std::numeric_limits<double>::max()) break;
+        if (refined[k] || dist >= bestCertified || dist - s.dx >= best) continue;
+        const double d = surfacePointNear(f, p, c, s.dx, dist);
+        if (d < (certified ? best - s.tolerance : best)) {
             best = d;
-            certified = ok;
+            certified = false;
         }
     }
     return std::copysign(best, value > 0.0 ? 1.0 : -1.0);

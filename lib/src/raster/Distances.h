@@ -25,7 +25,7 @@ struct DistanceCounts
 {
     std::uint64_t local = 0;       ///< certified by the shape's own local method (footPoints)
     std::uint64_t searched = 0;    ///< by the lattice search, refined to a certified foot point
-    std::uint64_t approximate = 0; ///< by the lattice search, an uncertified crossing point
+    std::uint64_t approximate = 0; ///< by the lattice search, a surface point not certified
     std::uint64_t unknown = 0;     ///< none: the surface is beyond the lattice window (NaN)
 
     DistanceCounts& operator+=(const DistanceCounts& o)
