@@ -47,6 +47,48 @@ void finishDistances(const implicit::Implicit& f, const openvdb::Coord& origin,
     }
 }
 
+/// A crossing of the surface on a lattice's edge: its distance from the query point, the point
+/// (linear interpolation of the values along the edge) and the edge's two ends.
+struct Crossing
+{
+    double dist = std::numeric_limits<double>::max();
+    Vec3d point;
+    int a = -1, b = -1;
+};
+
+/// The @a K crossings nearest to @a p of the edges of the lattice of @a side points a side
+/// (points and values @a px, @a py, @a pz, @a v, index (i side + j) side + k), nearest first;
+/// those not found keep dist max and a = -1.
+template<std::size_t K>
+std::array<Crossing, K> nearestCrossings(const double* px, const double* py, const double* pz,
+                                         const double* v, int side, const Vec3d& p)
+{
+    std::array<Crossing, K> nearest;
+    nearest.fill(Crossing{std::numeric_limits<double>::max(), p, -1, -1});
+    const int stride[3] = {side * side, side, 1};
+    for (int i = 0, a = 0; i < side; ++i) {
+        for (int j = 0; j < side; ++j) {
+            for (int k = 0; k < side; ++k, ++a) {
+                const int at[3] = {i, j, k};
+                for (int d = 0; d < 3; ++d) {
+                    if (at[d] + 1 >= side) continue;
+                    const int b = a + stride[d];
+                    if ((v[a] > 0.0) == (v[b] > 0.0)) continue;
+                    const double t = v[a] / (v[a] - v[b]);
+                    const Vec3d c(px[a] + t * (px[b] - px[a]), py[a] + t * (py[b] - py[a]),
+                                  pz[a] + t * (pz[b] - pz[a]));
+                    const double dist = (c - p).length();
+                    if (dist >= nearest.back().dist) continue;
+                    nearest.back() = Crossing{dist, c, a, b};
+                    std::sort(nearest.begin(), nearest.end(),
+                              [](const Crossing& l, const Crossing& r) { return l.dist < r.dist; });
+                }
+            }
+        }
+    }
+    return nearest;
+}
+
 /// The nearest to @a p of the surface points found on the lattice of step @a h (5 points a
 /// side) centred at @a c: the shape's crossings of the lattice's edges (linear interpolation),
 /// the nearest few bisected along their edges onto the surface (@a halvings times); @a found
@@ -67,35 +109,11 @@ Vec3d latticeSurfacePoint(const implicit::Implicit& f, const Vec3d& p, const Vec
         }
     }
     f.values(px, py, pz, v, kCount);
-    constexpr std::size_t kKeep = 3;
-    struct Edge { double dist; int a, b; };
-    std::array<Edge, kKeep> nearest;
-    nearest.fill({std::numeric_limits<double>::max(), -1, -1});
-    const int stride[3] = {kFine * kFine, kFine, 1};
-    for (int i = 0, m = 0; i < kFine; ++i) {
-        for (int j = 0; j < kFine; ++j) {
-            for (int k = 0; k < kFine; ++k, ++m) {
-                const int at[3] = {i, j, k};
-                for (int d = 0; d < 3; ++d) {
-                    if (at[d] + 1 >= kFine) continue;
-                    const int n = m + stride[d];
-                    if ((v[m] > 0.0) == (v[n] > 0.0)) continue;
-                    const double t = v[m] / (v[m] - v[n]);
-                    const Vec3d x(px[m] + t * (px[n] - px[m]), py[m] + t * (py[n] - py[m]),
-                                  pz[m] + t * (pz[n] - pz[m]));
-                    const double e = (x - p).length();
-                    if (e >= nearest.back().dist) continue;
-                    nearest.back() = {e, m, n};
-                    std::sort(nearest.begin(), nearest.end(),
-                              [](const Edge& l, const Edge& r) { return l.dist < r.dist; });
-                }
-            }
-        }
-    }
+    const auto nearest = nearestCrossings<3>(px, py, pz, v, kFine, p);
     found = nearest.front().a >= 0;
     Vec3d best = c;
     double bestDist = std::numeric_limits<double>::max();
-    for (const Edge& e : nearest) {
+    for (const Crossing& e : nearest) {
         if (e.a < 0) break;
         // Bisection between the two ends (of opposite signs).
         Vec3d lo(px[e.a], py[e.a], pz[e.a]), hi(px[e.b], py[e.b], pz[e.b]);
@@ -105,7 +123,8 @@ Vec3d latticeSurfacePoint(const implicit::Implicit& f, const Vec3d& p, const Vec
             ((f.value(mid) > 0.0) == loPositive ? lo : hi) = mid;
         }
         const Vec3d q = 0.5 * (lo + hi);
-        if ((q - p).length() < bestDist) bestDist = (q - p).length(), best = q;
+        const double d = (q - p).length();
+        if (d < bestDist) bestDist = d, best = q;
     }
     return best;
 }
@@ -114,8 +133,8 @@ Vec3d latticeSurfacePoint(const implicit::Implicit& f, const Vec3d& p, const Vec
 /// foot point failed: a crease, a sharp rim, a sliver), the nearest to @a p found, and its
 /// distance: latticeSurfacePoint() in the voxel-sized cube around @a c (steps of a quarter
 /// voxel), then twice in a cube half as large around the best point so far. A point of the
-/// surface (within its bisection's 1e-5 voxel), so never nearer than the surface, and within a few thousandths of a voxel of the
-/// nearest one where that lies in the cube; the crossing @a c itself, interpolated linearly
+/// surface (within its bisection's 1e-5 voxel), so never nearer than the surface, and within
+/// a few thousandths of a voxel of the nearest one where that lies in the cube; the crossing @a c itself, interpolated linearly
 /// across a whole voxel where the field is far from linear, was up to 0.82 voxel too far
 /// (TestTrueDistances.ApproximateDistancesAreSurfacePointsNearTheNearest). @a dist (|c - p|)
 /// where no edge crosses.
@@ -131,7 +150,8 @@ double surfacePointNear(const implicit::Implicit& f, const Vec3d& p, const Vec3d
         const double h = std::ldexp(0.25 * dx, -stage);
         const Vec3d q = latticeSurfacePoint(f, p, centre, h, 15 - stage, found);
         if (!found) break;
-        if ((q - p).length() < best) best = (q - p).length(), centre = q;
+        const double d = (q - p).length();
+        if (d < best) best = d, centre = q;
     }
     return best == std::numeric_limits<double>::max() ? dist : best;
 }
@@ -180,45 +200,23 @@ double searchDistance(const implicit::Implicit& f, const openvdb::Coord& ijk, do
     const Vec3d p(double(ijk.x()) * s.dx, double(ijk.y()) * s.dx, double(ijk.z()) * s.dx);
     // The nearest crossings of the lattice's edges (linear interpolation along the edge).
     constexpr std::size_t kKeep = 4;
-    std::array<std::pair<double, Vec3d>, kKeep> nearest;
-    nearest.fill({std::numeric_limits<double>::max(), p});
-    auto index = [side](int i, int j, int k) { return (std::size_t(i) * side + j) * side + k; };
-    for (int i = 0; i < side; ++i) {
-        for (int j = 0; j < side; ++j) {
-            for (int k = 0; k < side; ++k) {
-                const std::size_t a = index(i, j, k);
-                const int step[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-                for (const auto& d : step) {
-                    const int ii = i + d[0], jj = j + d[1], kk = k + d[2];
-                    if (ii >= side || jj >= side || kk >= side) continue;
-                    const std::size_t b = index(ii, jj, kk);
-                    if ((v[a] > 0.0) == (v[b] > 0.0)) continue;
-                    const double t = v[a] / (v[a] - v[b]);
-                    const Vec3d c(px[a] + t * (px[b] - px[a]), py[a] + t * (py[b] - py[a]),
-                                  pz[a] + t * (pz[b] - pz[a]));
-                    const double dist = (c - p).length();
-                    if (dist >= nearest.back().first) continue;
-                    nearest.back() = {dist, c};
-                    std::sort(nearest.begin(), nearest.end(),
-                              [](const auto& l, const auto& rr) { return l.first < rr.first; });
-                }
-            }
-        }
-    }
+    const auto nearest = nearestCrossings<kKeep>(px.data(), py.data(), pz.data(), v.data(), side, p);
     certified = false;
-    if (nearest.front().first == std::numeric_limits<double>::max()) {
+    if (nearest.front().a < 0) {
         // No crossing in the window: the surface is farther (more than r voxels along an axis).
         if (double(r) * s.dx < s.far) return std::numeric_limits<double>::quiet_NaN();
         certified = true;
         return std::copysign(double(r + 1) * s.dx, value > 0.0 ? 1.0 : -1.0);
     }
-    // The nearest surface point among the crossings' foot points (the crossing itself where
-    // the refinement is not certified: a crease, a singular point).
+    // The nearest surface point among the crossings' foot points, or where a crossing's
+    // refinement is not certified (a crease, a sharp rim, a singular point), the surface points
+    // found near it.
     double best = std::numeric_limits<double>::max();
     std::array<bool, kKeep> refined{};
     for (std::size_t k = 0; k < kKeep; ++k) {
-        const auto& [dist, c] = nearest[k];
-        if (dist == std::numeric_limits<double>::max()) break;
+        const double dist = nearest[k].dist;
+        const Vec3d& c = nearest[k].point;
+        if (nearest[k].a < 0) break;
         Vec3d q;
         // Newton's method where the rounds fail only for a crossing nearer than the nearest
         // point certified so far (it costs seven gradients a step: a mesh's crossings took
@@ -238,10 +236,10 @@ double searchDistance(const implicit::Implicit& f, const openvdb::Coord& ijk, do
     // point was not the nearest.
     const double bestCertified = best;
     for (std::size_t k = 0; k < kKeep; ++k) {
-        const auto& [dist, c] = nearest[k];
-        if (dist == std::numeric_limits<double>::max()) break;
+        const double dist = nearest[k].dist;
+        if (nearest[k].a < 0) break;
         if (refined[k] || dist >= bestCertified || dist - s.dx >= best) continue;
-        const double d = surfacePointNear(f, p, c, s.dx, dist);
+        const double d = surfacePointNear(f, p, nearest[k].point, s.dx, dist);
         if (d < (certified ? best - s.tolerance : best)) {
             best = d;
             certified = false;

@@ -57,7 +57,8 @@ void valuesAndTrueDistances(const implicit::Implicit& f, const openvdb::Coord& o
 /// @brief The last resort where no local method is certified (a singular point, a medial axis,
 /// a thin feature, a corner of three surfaces): @a f on the voxel lattice around @a ijk (a cube
 /// of side 2 searchRadius + 1), the surface's crossings of the lattice's edges, and the nearest
-/// few refined to foot points (implicit::refineFootPoint). No crossing in the window: the
+/// few refined to foot points (implicit::refineFootPoint), or where that is not certified,
+/// points of the surface found near them on finer lattices (approximate). No crossing in the window: the
 /// surface is farther than the window: distance +/- (searchRadius + 1) dx by the sign of
 /// @a value when that is beyond far, else NaN (unknown: the band is wider than the window, and
 /// the rasterizer re-distances such voxels by fast sweeping).
