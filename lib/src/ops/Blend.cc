@@ -10,6 +10,7 @@
 #include <ivdb/util/System.h>
 
 #include "../levelset/Sweeping.h"
+#include "ActiveWithin.h"
 #include "BlendDistance.h"
 
 #include <openvdb/tools/Prune.h>
@@ -123,80 +124,7 @@ std::vector<Coord> leafOrigins(const MaskTree& mask)
 int leavesFor(double voxels) { return int(std::ceil(voxels / kLeafDim)); }
 
 using MaskBits = MaskTree::LeafNodeType::NodeMaskType;
-
-/// The voxels of the leaf at @a origin within @a s voxels (s steps to any of 26 neighbours,
-/// 1 <= s <= 8) of an active voxel of the tree @a acc reads (an active tile counts as active
-/// voxels). From the active masks of the 27 leaves around, as rows of bits along z (x and y
-/// from -s to 7 + s, bit z + s), grown along z, then y, then x. The reach is a template
-/// argument, so that the loops unroll; activeWithin() picks it.
-template<int s, typename AccessorT>
-MaskBits activeWithinOf(const Coord& origin, AccessorT& acc)
-{
-    static_assert(s >= 1 && s <= kLeafDim, "within a leaf of the leaf");
-    constexpr int D = kLeafDim + 2 * s;
-    // Each neighbour leaf's rows: a mask, all on (an active tile) or none.
-    const MaskBits* masks[3][3][3];
-    bool full[3][3][3];
-    for (int a = 0; a < 3; ++a) {
-        for (int b = 0; b < 3; ++b) {
-            for (int c = 0; c < 3; ++c) {
-                const Coord o = origin.offsetBy((a - 1) * kLeafDim, (b - 1) * kLeafDim,
-                                                (c - 1) * kLeafDim);
-                const auto* leaf = acc.probeConstLeaf(o);
-                masks[a][b][c] = leaf ? &leaf->getValueMask() : nullptr;
-                full[a][b][c] = !leaf && acc.isValueOn(o);
-            }
-        }
-    }
-    auto row = [&](int a, int b, int c, int x, int y) -> std::uint32_t {
-        if (full[a][b][c]) return 0xFFu;
-        if (!masks[a][b][c]) return 0u;
-        const auto word = masks[a][b][c]->template getWord<std::uint64_t>(openvdb::Index(x));
-        return std::uint32_t(word >> (kLeafDim * y)) & 0xFFu;
-    };
-    constexpr std::uint32_t keep = (std::uint32_t(1) << D) - 1u;
-    std::uint32_t rows[D][D];
-    for (int i = 0; i < D; ++i) {
-        const int xi = i - s, a = xi < 0 ? 0 : xi >= kLeafDim ? 2 : 1, x = xi & (kLeafDim - 1);
-        for (int j = 0; j < D; ++j) {
-            const int yj = j - s, b = yj < 0 ? 0 : yj >= kLeafDim ? 2 : 1, y = yj & (kLeafDim - 1);
-            const std::uint32_t r = (row(a, b, 1, x, y) << s) |
-                                    (row(a, b, 0, x, y) >> (kLeafDim - s)) |
-                                    ((row(a, b, 2, x, y) << (kLeafDim + s)) & keep);
-            std::uint32_t grown = r;
-            for (int k = 1; k <= s; ++k) grown |= (r << k) | (r >> k);
-            rows[i][j] = grown;
-        }
-    }
-    MaskBits out;
-    for (int x = 0; x < kLeafDim; ++x) {
-        std::uint64_t word = 0;
-        for (int y = 0; y < kLeafDim; ++y) {
-            std::uint32_t r = 0;
-            for (int dx = 0; dx <= 2 * s; ++dx) {
-                for (int dy = 0; dy <= 2 * s; ++dy) r |= rows[x + dx][y + dy];
-            }
-            word |= std::uint64_t((r >> s) & 0xFFu) << (kLeafDim * y);
-        }
-        out.template getWord<std::uint64_t>(openvdb::Index(x)) = word;
-    }
-    return out;
-}
-
-template<typename AccessorT>
-MaskBits activeWithin(const Coord& origin, AccessorT& acc, int s)
-{
-    switch (s) {
-    case 1: return activeWithinOf<1>(origin, acc);
-    case 2: return activeWithinOf<2>(origin, acc);
-    case 3: return activeWithinOf<3>(origin, acc);
-    case 4: return activeWithinOf<4>(origin, acc);
-    case 5: return activeWithinOf<5>(origin, acc);
-    case 6: return activeWithinOf<6>(origin, acc);
-    case 7: return activeWithinOf<7>(origin, acc);
-    default: return activeWithinOf<8>(origin, acc);
-    }
-}
+using detail::activeWithin;
 
 /// The band voxels' surface points c = x - phi(x) n and unit normals n (index space): the
 /// planes the extension passes on, seed k's at index k. Apart, so that the search for the
