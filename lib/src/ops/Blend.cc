@@ -839,9 +839,8 @@ std::vector<GrownBand> growBands(CsgOp op, const BlendPlan& plan,
         const int reach = keepReach(plan, i, readers);
         MaskTree::Ptr& k = byReach[reach];
         if (!k) k = dilatedCopy(crease, reach);
-        keep[i] = k;
+        keep[i] = readers == ReadBy::Crease ? std::make_shared<MaskTree>(*k) : k;
         if (readers == ReadBy::Crease) {
-            keep[i] = std::make_shared<MaskTree>(*k);
             std::vector<MaskTree::LeafNodeType*> leaves;
             keep[i]->getNodes(leaves);
             tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
