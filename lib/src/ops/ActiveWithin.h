@@ -8,11 +8,12 @@
 
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <cstdint>
 
 namespace ivdb::ops::detail {
 
-/// A leaf's voxels as bits (the masks of every 8^3 leaf type), and its side.
+/// A leaf's voxels as bits (the masks of every 8^3 leaf type), and the leaf's side.
 using LeafMask = openvdb::util::NodeMask<3>;
 
 constexpr int kMaskDim = 8;
@@ -33,8 +34,8 @@ LeafMask activeWithinOf(const openvdb::Coord& origin, AccessorT& acc)
     for (int a = 0; a < 3; ++a) {
         for (int b = 0; b < 3; ++b) {
             for (int c = 0; c < 3; ++c) {
-                const openvdb::Coord o = origin.offsetBy((a - 1) * kMaskDim, (b - 1) * kMaskDim,
-                                                (c - 1) * kMaskDim);
+                const openvdb::Coord o = origin.offsetBy(
+                    (a - 1) * kMaskDim, (b - 1) * kMaskDim, (c - 1) * kMaskDim);
                 const auto* leaf = acc.probeConstLeaf(o);
                 masks[a][b][c] = leaf ? &leaf->getValueMask() : nullptr;
                 full[a][b][c] = !leaf && acc.isValueOn(o);
@@ -76,10 +77,11 @@ LeafMask activeWithinOf(const openvdb::Coord& origin, AccessorT& acc)
     return out;
 }
 
+/// activeWithinOf() for a reach @a s known at run time, taken into [1, 8].
 template<typename AccessorT>
 LeafMask activeWithin(const openvdb::Coord& origin, AccessorT& acc, int s)
 {
-    switch (s) {
+    switch (std::clamp(s, 1, kMaskDim)) {
     case 1: return activeWithinOf<1>(origin, acc);
     case 2: return activeWithinOf<2>(origin, acc);
     case 3: return activeWithinOf<3>(origin, acc);

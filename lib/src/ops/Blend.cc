@@ -774,7 +774,7 @@ MaskTree::Ptr creaseToBlend(CsgOp op, const MaskTree& crease,
     auto out = std::make_shared<MaskTree>(crease);
     std::vector<MaskTree::LeafNodeType*> leaves;
     out->getNodes(leaves);
-    const int near = std::max(1, std::min(kLeafDim, int(std::ceil(swellVoxels / 0.95))));
+    const int near = int(std::ceil(swellVoxels / 0.95));
     tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
                       [&](const tbb::blocked_range<size_t>& r) {
         std::vector<openvdb::tree::ValueAccessor<const FloatTree>> acc;
@@ -786,8 +786,11 @@ MaskTree::Ptr creaseToBlend(CsgOp op, const MaskTree& crease,
                 clearBeyondDecidingSide(bits, o, acc[i], termSign(op, i));
             }
             if (bits.isOff()) continue;
+            // Near some band: each input's voxels within reach, until they hold all of the leaf's.
             MaskBits nearBand;
-            for (size_t i = 0; i < grids.size(); ++i) nearBand |= activeWithin(o, acc[i], near);
+            for (size_t i = 0; i < grids.size() && !(bits & !nearBand).isOff(); ++i) {
+                nearBand |= activeWithin(o, acc[i], near);
+            }
             bits &= nearBand;
         }
     });
