@@ -39,9 +39,12 @@ void finishDistances(const implicit::Implicit& f, const openvdb::Coord& origin,
         const openvdb::Coord ijk = origin.offsetBy(o >> 6, (o >> 3) & 7, o & 7);
         out[i] = searchDistance(f, ijk, values[i], s, certified);
         // A point of the surface the foot points found, though not proven the nearest, bounds
-        // an approximate answer: the lattice's crossings, unrefined, can be farther.
-        if (!certified && feet.surface[i] && std::abs(feet.distance[i]) < std::abs(out[i])) {
+        // the answer: the lattice's crossings, unrefined, can be farther, and a refined one
+        // nearer than every other crossing's can still be a farther foot point (a blend's, on
+        // the other side of a valley, 0.09 voxel): then it was not the nearest after all.
+        if (feet.surface[i] && std::abs(feet.distance[i]) < std::abs(out[i]) - s.tolerance) {
             out[i] = std::copysign(std::abs(feet.distance[i]), out[i]);
+            certified = false;
         }
         ++(std::isnan(out[i]) ? counts.unknown : certified ? counts.searched : counts.approximate);
     }

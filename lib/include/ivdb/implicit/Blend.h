@@ -115,6 +115,11 @@ public:
     bool isDistanceBound() const override;
     /// The children's largest (the gradient is a convex combination of theirs).
     double lipschitzBound() const override;
+    /// Where a child's distance may kink within @a radius of @a p: a box's or a capped cone's
+    /// (moved rigidly or scaled uniformly), inside it, where the two largest of its faces'
+    /// values are within 2 radius of each other (the nearest face changes there); or where a
+    /// child says so itself.
+    bool mayKinkWithin(const Vec3d& p, double radius) const override;
     std::string typeName() const override;
 
     Op op() const { return mOp; }
@@ -152,6 +157,14 @@ private:
     void feetFromRows(const double* x, const double* y, const double* z, const double* values,
                       std::size_t n, const FootQuery& query, const double* terms,
                       const double* cg, double* w, bool haveWeights, FootPoints& out) const;
+    /// For the points @a out leaves to the smooth iteration (not @a led by a child): its answers
+    /// uncertified where a child may kink within their distance (mayKinkWithin()), and nearer
+    /// points of the surface from each child's own foot point (and each face's, near a kink)
+    /// where the iteration is not certified, and from the other child's where a certified foot
+    /// point may be one of two.
+    void nearerFeet(const double* x, const double* y, const double* z, const double* values,
+                    std::size_t n, const FootQuery& query, const double* terms, const bool* led,
+                    FootPoints& out) const;
 
     Op mOp;
     BlendKernel mKernel;

@@ -39,6 +39,8 @@ public:
     bool isExactOutside() const override;
     /// Min and max of 1-Lipschitz children are 1-Lipschitz.
     bool isDistanceBound() const override;
+    /// Where any child may.
+    bool mayKinkWithin(const Vec3d& p, double radius) const override;
     /// The children's largest (min and max change no faster than their fastest argument).
     double lipschitzBound() const override;
     /// 1 outside a union, inside an intersection or a difference, where the children's are 1
@@ -124,6 +126,8 @@ public:
     /// The surface footPoints() answers for a non-uniform scale, where that is a world quadric
     /// or an exact SDF (a box moved rigidly).
     Ptr sameSurface() const override;
+    /// The child's, at the child-space point, over the radius over min(scale).
+    bool mayKinkWithin(const Vec3d& p, double radius) const override;
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "transform"; }
 

@@ -150,6 +150,18 @@ public:
     /// moved rigidly), or null. Its values differ (a distance, or another field): the rasterizer
     /// takes it where it stores distances, not where it stores this shape's own values.
     virtual Ptr sameSurface() const { return nullptr; }
+    /// @brief True if the field may have a kink (its gradient jumping) within @a radius of
+    /// @a p that a local foot-point iteration cannot see past: then a point q where p - q lies
+    /// along the gradient can be one of several such points, not the nearest. A blend of
+    /// children whose distances kink inside them (a box's or a capped cone's, where the
+    /// nearest face changes) says so near those kinks; the nodes above it pass the question
+    /// on. False by default (smooth fields; CSG nodes find their creases' points themselves).
+    virtual bool mayKinkWithin(const Vec3d& p, double radius) const
+    {
+        (void)p;
+        (void)radius;
+        return false;
+    }
     /// @brief A node equal to this one at every point of @a box, possibly simpler
     /// (a union drops children that cannot be the minimum there).
     virtual Ptr prune(const BBoxd& box) const;

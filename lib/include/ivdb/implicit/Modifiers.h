@@ -40,6 +40,11 @@ public:
     double distanceFactor(bool outside) const override;
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
     double lipschitzBound() const override { return mChild->lipschitzBound(); }
+    /// The solid's where there is one (its foot points are this node's), else the child's.
+    bool mayKinkWithin(const Vec3d& p, double radius) const override
+    {
+        return (mSolid ? mSolid : mChild)->mayKinkWithin(p, radius);
+    }
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "offset"; }
 
@@ -86,6 +91,11 @@ public:
     bool isExactOutside() const override { return mChild->isExactSdf(); }
     bool isDistanceBound() const override { return mChild->isDistanceBound(); }
     double lipschitzBound() const override { return mChild->lipschitzBound(); }
+    /// The solid's where there is one (its foot points are this node's), else the child's.
+    bool mayKinkWithin(const Vec3d& p, double radius) const override
+    {
+        return (mSolid ? mSolid : mChild)->mayKinkWithin(p, radius);
+    }
     Ptr prune(const BBoxd& box) const override;
     std::string typeName() const override { return "shell"; }
 
