@@ -2003,15 +2003,25 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     auto term = [&](std::size_t c, double v) { // a child's value v as a term, union form
         return rho * (mOp == Op::Difference && c > 0 ? -v : v);
     };
+    // The points asked, in a first pass without branches (most are led, certified or far).
+    bool asked[kMaxBatch];
+    if (nc == 2) {
+        for (std::size_t i = 0; i < n; ++i) {
+            const bool valley = std::abs(terms[i] - terms[n + i]) < 2.0 * std::abs(out.distance[i]);
+            asked[i] = !led[i] && std::abs(values[i]) < query.far && (!out.ok[i] || valley);
+        }
+    } else {
+        for (std::size_t i = 0; i < n; ++i) {
+            asked[i] = !led[i] && std::abs(values[i]) < query.far && !out.ok[i];
+        }
+    }
     for (std::size_t i = 0; i < n; ++i) {
-        if (led[i] || std::abs(values[i]) >= query.far) continue;
+        if (!asked[i]) continue;
         const Vec3d p(x[i], y[i], z[i]);
         std::size_t only = nc; // all children's starts
         if (out.ok[i]) {
             const double dist = std::abs(out.distance[i]);
-            if (nc != 2) continue;
             const double atP = rho * (terms[i] - terms[n + i]);
-            if (std::abs(atP) >= 2.0 * dist) continue;
             const Vec3d q(out.x[i], out.y[i], out.z[i]);
             const double atQ = term(0, mChildren[0]->value(q)) - term(1, mChildren[1]->value(q));
             if (std::abs(atQ - atP) <= dist) continue;
