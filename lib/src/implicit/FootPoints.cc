@@ -1965,6 +1965,9 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
                        const bool* led, FootPoints& out) const
 {
     const std::size_t nc = mChildren.size();
+    auto own = [&](std::size_t c, std::size_t i) { // child c's own value at point i
+        return (mOp == Op::Difference && c > 0 ? -1.0 : 1.0) * terms[c * n + i];
+    };
     // The smooth iteration stops at a point q where p - q lies along the blend's gradient: the
     // nearest point of the surface where the field is smooth about p, but one of several where
     // a child's distance kinks within |p - q| of p, and there the nearest is often across the
@@ -1975,12 +1978,11 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     bool kinked[kMaxBatch] = {};
     for (std::size_t c = 0; c < nc; ++c) {
         if (!pieceParts(*mChildren[c], pieces[c])) continue;
-        const double sign = mOp == Op::Difference && c > 0 ? -1.0 : 1.0;
         for (std::size_t i = 0; i < n; ++i) {
             if (led[i] || std::abs(values[i]) >= query.far) continue;
-            const double own = sign * terms[c * n + i]; // the child's own value
             const double reach = out.ok[i] ? std::abs(out.distance[i]) : query.far;
-            if (!piecesKinkWithin(pieces[c], Vec3d(x[i], y[i], z[i]), own, reach + query.tolerance)) {
+            if (!piecesKinkWithin(pieces[c], Vec3d(x[i], y[i], z[i]), own(c, i),
+                                  reach + query.tolerance)) {
                 continue;
             }
             kinked[i] = true;
@@ -2002,6 +2004,20 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
     auto term = [&](std::size_t c, double v) { // a child's value v as a term, union form
         return rho * (mOp == Op::Difference && c > 0 ? -v : v);
+    };
+    // The iteration from @a start, kept where it finds a point of the surface nearer than what
+    // point i holds (a certified point stays certified; another becomes a surface point).
+    auto offer = [&](std::size_t i, const Vec3d& p, const Vec3d& start) {
+        Vec3d q;
+        if (!smoothRefine(*this, p, start, query.tolerance, q) &&
+            !newtonFootPoint(*this, p, start, query.tolerance, q)) {
+            return;
+        }
+        const double d = (q - p).length();
+        if ((out.ok[i] || out.surface[i]) && d >= std::abs(out.distance[i])) return;
+        out.surface[i] = !out.ok[i];
+        out.distance[i] = std::copysign(d, values[i]);
+        out.x[i] = q[0], out.y[i] = q[1], out.z[i] = q[2];
     };
     // The points asked, in a first pass without branches (most are led, certified or far).
     bool asked[kMaxBatch];
@@ -2028,20 +2044,7 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
             only = atQ < 0.0 ? 1 : 0; // the child that does not decide at q
         }
         for (std::size_t c = 0; c < nc; ++c) {
-            if (only != nc && c != only) continue;
-            const double sign = mOp == Op::Difference && c > 0 ? -1.0 : 1.0;
-            const Vec3d start = p - mChildren[c]->gradient(p) * (sign * terms[c * n + i]);
-            Vec3d q;
-            if (!smoothRefine(*this, p, start, query.tolerance, q) &&
-                !newtonFootPoint(*this, p, start, query.tolerance, q)) {
-                continue;
-            }
-            const double d = (q - p).length();
-            const bool known = out.ok[i] || out.surface[i];
-            if (known && d >= std::abs(out.distance[i])) continue;
-            out.surface[i] = !out.ok[i];
-            out.distance[i] = std::copysign(d, values[i]);
-            out.x[i] = q[0], out.y[i] = q[1], out.z[i] = q[2];
+            if (only == nc || c == only) offer(i, p, p - mChildren[c]->gradient(p) * own(c, i));
         }
         if (!kinked[i]) continue;
         // Near a kink, from the foot of the perpendicular on each face within reach of the
@@ -2051,25 +2054,12 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
             const double reach =
                 (out.surface[i] ? std::abs(out.distance[i]) : query.far) + query.tolerance;
             double largest = 0.0;
-            const double sign = mOp == Op::Difference && c > 0 ? -1.0 : 1.0;
-            if (pieces[c].empty() ||
-                !piecesKinkWithin(pieces[c], p, sign * terms[c * n + i], reach, &largest)) {
+            if (pieces[c].empty() || !piecesKinkWithin(pieces[c], p, own(c, i), reach, &largest)) {
                 continue;
             }
             for (const Piece& piece : pieces[c]) {
                 const double v = piece.value(p);
-                if (v < largest - 2.0 * reach) continue;
-                const Vec3d start = p - piece.gradient(p) * v;
-                Vec3d q;
-                if (!smoothRefine(*this, p, start, query.tolerance, q) &&
-                    !newtonFootPoint(*this, p, start, query.tolerance, q)) {
-                    continue;
-                }
-                const double d = (q - p).length();
-                if (out.surface[i] && d >= std::abs(out.distance[i])) continue;
-                out.surface[i] = true;
-                out.distance[i] = std::copysign(d, values[i]);
-                out.x[i] = q[0], out.y[i] = q[1], out.z[i] = q[2];
+                if (v >= largest - 2.0 * reach) offer(i, p, p - piece.gradient(p) * v);
             }
         }
     }

@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: Apache-2.0
+"""Random scene files of one blend or smooth CSG node of two primitives, for timing and
+checking the true distances of blends (docs/performance.md#true-distances).
+
+Each scene: a `blend` (p 10 to 60) or `smooth` (k 0.04 to 0.2) union, intersection or
+difference of two of capped_cylinder, capped_cone, capsule, torus, sphere and box, each moved
+(rotated, translated, sometimes scaled uniformly) with probability 0.6, the node itself with
+probability 0.3; voxel size 0.02. The same seed writes the same scenes.
+
+Usage: scripts/random_blends.py SEED COUNT DIR   (writes DIR/s{SEED}_{i}.json)
+Timing, against another binary: ivdb bench-run DIR/s5_0.json --method sparse --voxel-size 0.02
+"""
+import json
+import os
+import random
+import sys
+
+
+def main():
+    if len(sys.argv) != 4:
+        sys.exit(__doc__)
+    seed, count, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+    rng = random.Random(seed)
+
+    def v(s=0.4):
+        return [round(rng.uniform(-s, s), 3) for _ in range(3)]
+
+    def primitive():
+        t = rng.choice(["capped_cylinder", "capped_cone", "capped_cone", "capsule", "torus", "sphere", "box"])
+        if t == "capped_cylinder":
+            return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.12, 0.35), 3)}
+        if t == "capped_cone":
+            return {"type": t, "a": v(), "b": v(), "radius_a": round(rng.uniform(0.1, 0.45), 3),
+                    "radius_b": round(rng.uniform(0.05, 0.4), 3)}
+        if t == "capsule":
+            return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.1, 0.3), 3)}
+        if t == "torus":
+            major = rng.uniform(0.2, 0.45)
+            return {"type": t, "center": v(0.2), "major_radius": round(major, 3),
+                    "minor_radius": round(rng.uniform(0.06, 0.8 * major), 3)}
+        if t == "sphere":
+            return {"type": t, "center": v(), "radius": round(rng.uniform(0.1, 0.4), 3)}
+        return {"type": t, "center": v(0.2), "size": [round(rng.uniform(0.2, 0.7), 3) for _ in range(3)]}
+
+    def moved(shape):
+        r = rng.random()
+        if r < 0.4:
+            return shape
+        t = {"type": "transform", "child": shape,
+             "rotate_deg": [round(rng.uniform(-60, 60), 1) for _ in range(3)], "translate": v(0.1)}
+        if r > 0.75:
+            t["scale"] = round(rng.uniform(0.7, 1.3), 3)
+        return t
+
+    os.makedirs(out, exist_ok=True)
+    for i in range(count):
+        children = [moved(primitive()) for _ in range(2)]
+        op = rng.choice(["union", "union", "intersection", "difference"])
+        if rng.random() < 0.5:
+            node = {"type": "smooth", "op": op, "k": round(rng.uniform(0.04, 0.2), 3), "children": children}
+        else:
+            node = {"type": "blend", "op": op, "p": round(rng.uniform(10, 60), 1), "children": children}
+        if rng.random() < 0.3:
+            node = moved(node)
+        with open(os.path.join(out, f"s{seed}_{i}.json"), "w") as f:
+            json.dump({"voxel_size": 0.02, "shape": node}, f)
+
+
+if __name__ == "__main__":
+    main()
