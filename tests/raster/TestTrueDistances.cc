@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <limits>
@@ -1912,6 +1913,111 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreNoFartherThanTheirSurfaces)
                     (unsigned long long)stats.localDistances,
                     (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
                     (unsigned long long)stats.approximateDistances);
+    }
+}
+
+TEST_F(TestTrueDistances, BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheirKinks)
+{
+    // Near a kink of a box's or a capped cylinder's or cone's distance, the blend is made of
+    // sheets, each the blend with one face's plane or one edge's distance in the child's place,
+    // and the sheets' distances bound the blend's from both sides where the kink is one child's
+    // only (docs/method.md#offsets-shells-blends-and-grid-shapes). Of the band's voxels whose
+    // ball of radius |f| may hold a kink (at most 1,200 of them, evenly spread; 300 sanitized),
+    // each distance Blend::footPoints certifies is no farther than a brute-force search
+    // (bisection on the radius of spheres of 4,000 directions around the voxel that first reach
+    // the other sign: a surface point that far) by more than 0.002 voxel (twice the tolerance;
+    // measured 0.0000 at most), and at least 95%, 95%, 93% and 92% are certified: measured 98%,
+    // 98%, 96% and 95%, against 77%, 52%, 79% and 76% without the sheets (the lead rule's). The
+    // rasterizer's lattice searches: 623, 1,115, 4,982 and 1,605 of the band's voxels, against
+    // 2,732, 4,583, 7,870 and 2,199 without the sheets.
+    const double dx = 0.02, tolerance = 1e-3 * dx, far = 3.0 * dx;
+    using implicit::Implicit;
+    const auto box = std::make_shared<implicit::Box>(Vec3d(0.0), Vec3d(1.2, 0.8, 0.8));
+    const auto ball = std::make_shared<implicit::Sphere>(Vec3d(0.5, 0.3, 0.2), 0.45);
+    const auto cylinder = std::make_shared<implicit::CappedCone>(Vec3d(0.0, 0.0, -0.6), Vec3d(0.0, 0.0, 0.6),
+                                                                 0.25, 0.25, "capped_cylinder");
+    const auto cone = std::make_shared<implicit::CappedCone>(Vec3d(-0.1, 0.0, -0.5), Vec3d(0.1, 0.1, 0.5), 0.45, 0.15);
+    struct Case
+    {
+        std::string name;
+        Implicit::Ptr shape;
+        double certified;           // the least fraction certified
+        std::uint64_t searches;     // the most lattice searches of the rasterizer
+    };
+    const std::vector<Case> cases = {
+        {"smooth union of a box and a sphere",
+         std::make_shared<implicit::Blend>(implicit::CsgOp::Union, implicit::BlendKernel::polynomial(0.15),
+                                           std::vector<Implicit::Ptr>{box, ball}),
+         0.95, 700},
+        {"blend of a box and a sphere",
+         std::make_shared<implicit::Blend>(implicit::CsgOp::Union, 20.0, std::vector<Implicit::Ptr>{box, ball}),
+         0.95, 1250},
+        {"smooth difference of a box and a cylinder",
+         std::make_shared<implicit::Blend>(implicit::CsgOp::Difference, implicit::BlendKernel::polynomial(0.1),
+                                           std::vector<Implicit::Ptr>{box, cylinder}),
+         0.93, 5500},
+        {"blend of a cone and a sphere",
+         std::make_shared<implicit::Blend>(implicit::CsgOp::Union, 30.0, std::vector<Implicit::Ptr>{cone, ball}),
+         0.92, 1800},
+    };
+    const std::vector<Vec3d> dirs = sphereDirections(4000);
+#ifdef IVDB_SANITIZED
+    const int every = 4;
+#else
+    const int every = 1;
+#endif
+    for (const Case& c : cases) {
+        raster::RasterStats stats;
+        raster::RasterSettings s = settings(dx);
+        s.stats = &stats;
+        const auto g = raster::rasterize(c.shape, s);
+        EXPECT_EQ(stats.sweptDistances, 0u) << c.name;
+        EXPECT_LE(stats.searchedDistances + stats.approximateDistances, c.searches) << c.name;
+        // The voxels whose ball to the surface may hold a kink (the ball of |f| lies within
+        // the distance's), evenly thinned to at most 1,200 (300 sanitized).
+        std::vector<Vec3d> near;
+        for (auto it = g->cbeginValueOn(); it; ++it) {
+            const Vec3d p = Vec3d(it.getCoord().x(), it.getCoord().y(), it.getCoord().z()) * dx;
+            if (c.shape->mayKinkWithin(p, std::abs(c.shape->value(p)))) near.push_back(p);
+        }
+        std::vector<Vec3d> points;
+        const std::size_t stride = near.size() / (1200 / every) + 1;
+        for (std::size_t k = 0; k < near.size(); k += stride) points.push_back(near[k]);
+        implicit::FootQuery query;
+        query.tolerance = tolerance;
+        query.far = far;
+        query.feet = false;
+        int certified = 0, checked = 0;
+        double farther = -1.0;
+        for (std::size_t b = 0; b < points.size(); b += implicit::kMaxBatch) {
+            const std::size_t n = std::min(implicit::kMaxBatch, points.size() - b);
+            double x[implicit::kMaxBatch], y[implicit::kMaxBatch], z[implicit::kMaxBatch], v[implicit::kMaxBatch];
+            for (std::size_t k = 0; k < n; ++k) {
+                x[k] = points[b + k][0], y[k] = points[b + k][1], z[k] = points[b + k][2];
+            }
+            implicit::FootPoints feet;
+            c.shape->valuesAndFootPoints(x, y, z, n, query, v, feet);
+            for (std::size_t k = 0; k < n; ++k) {
+                if (!feet.ok[k]) continue;
+                ++certified;
+                const double d = std::abs(feet.distance[k]);
+                if (d >= far) continue; // only said to be far
+                const double hi = searchedSurfaceDistance(*c.shape, points[b + k], dirs, far + dx);
+                ASSERT_FALSE(std::isnan(hi)) << c.name << " at " << points[b + k];
+                const double excess = (d - hi) / dx;
+                farther = std::max(farther, excess);
+                EXPECT_LE(excess, 0.002) << c.name << " at " << points[b + k] << ": " << d / dx
+                                         << " voxels, a surface point " << hi / dx << " voxels away";
+                ++checked;
+            }
+        }
+        const double fraction = double(certified) / double(std::max<std::size_t>(points.size(), 1));
+        EXPECT_GE(points.size(), 600u / every) << c.name;
+        EXPECT_GE(fraction, c.certified) << c.name;
+        std::printf("%s: %zu voxels near a kink, %.0f%% certified, %d checked, at most %.2g voxel "
+                    "farther than the search; %llu lattice searches\n", c.name.c_str(), points.size(),
+                    100.0 * fraction, checked, farther,
+                    (unsigned long long)(stats.searchedDistances + stats.approximateDistances));
     }
 }
 

@@ -579,6 +579,482 @@ bool piecesKinkWithin(const std::vector<Piece>& pieces, const Vec3d& p, double o
     return first - second <= 2.0 * radius;
 }
 
+/// An edge where two pieces of a convex solid meet: two of a box's faces (at right angles, along
+/// a line), or a capped cylinder's or cone's side and a cap (a rim circle). Outside the solid,
+/// where its nearest point is on the edge (the edge's region), its distance is the distance to
+/// the edge.
+struct Edge
+{
+    std::size_t a = 0, b = 0;   // the pieces (a rim: the side, then the cap)
+    bool rim = false;
+    Vec3d origin, axis;         // rim: the axis, s measured along it from origin
+    double s0 = 0.0, r0 = 0.0;  // rim: the circle's place on the axis and its radius
+    double capS = 1.0;          // rim: the cap's outward normal, (capS, 0) in (s, rho)
+    double sideS = 0.0, sideR = 1.0; // rim: the side's outward unit normal in (s, rho)
+
+    /// A rim: @a p's coordinates along the axis and from it, and the unit radial direction.
+    void meridian(const Vec3d& p, double& s, double& r, Vec3d& radial) const
+    {
+        const Vec3d w = p - origin;
+        s = dot(w, axis);
+        radial = w - axis * s;
+        r = radial.length();
+        radial = r > 0.0 ? radial / r : Vec3d(0.0);
+    }
+    /// The distance from @a p to the edge.
+    double distance(const std::vector<Piece>& pieces, const Vec3d& p) const
+    {
+        if (!rim) return std::hypot(pieces[a].value(p), pieces[b].value(p));
+        double s, r;
+        Vec3d radial;
+        meridian(p, s, r, radial);
+        return std::hypot(s - s0, r - r0);
+    }
+    Vec3d gradient(const std::vector<Piece>& pieces, const Vec3d& p) const
+    {
+        double u, v;
+        Vec3d du, dv;
+        if (!rim) {
+            u = pieces[a].value(p), v = pieces[b].value(p);
+            du = pieces[a].gradient(p), dv = pieces[b].gradient(p);
+        } else {
+            double s, r;
+            meridian(p, s, r, dv);
+            u = s - s0, v = r - r0, du = axis;
+        }
+        const double len = std::hypot(u, v);
+        if (!(len > 0.0)) return Vec3d(0.0); // on the edge: no normal
+        return (du * u + dv * v) / len;
+    }
+    /// How far @a p is from the edge's region: where two faces of a box at right angles are
+    /// both >= 0; for a rim, the wedge of the two outward normals at the circle, in the
+    /// half-plane through the axis (the region is a solid of revolution).
+    double regionDistance(const std::vector<Piece>& pieces, const Vec3d& p) const
+    {
+        if (!rim) {
+            return std::hypot(std::max(-pieces[a].value(p), 0.0),
+                              std::max(-pieces[b].value(p), 0.0));
+        }
+        double s, r;
+        Vec3d radial;
+        meridian(p, s, r, radial);
+        const double ws = s - s0, wr = r - r0;
+        // Inside the wedge: a combination of the two normals with weights >= 0.
+        const double det = capS * sideR; // the normals (capS, 0) and (sideS, sideR)
+        const double kSide = wr / sideR, kCap = (ws - kSide * sideS) / capS;
+        if (det != 0.0 && kSide >= 0.0 && kCap >= 0.0) return 0.0;
+        // Else the nearest of its two boundary rays.
+        auto toRay = [&](double ns, double nr) {
+            const double t = std::max(ws * ns + wr * nr, 0.0);
+            return std::hypot(ws - t * ns, wr - t * nr);
+        };
+        return std::min(toRay(capS, 0.0), toRay(sideS, sideR));
+    }
+};
+
+/// The edges and corners of a convex solid made of @a pieces (pieceParts()): a box's twelve
+/// edges (pairs of faces at right angles) and eight corners (triples), with @a perpendicular
+/// (row-major, pieces by pieces: which pairs meet at right angles, the others parallel) and
+/// @a square true; a capped cylinder's or cone's two rims (@a square true only for a
+/// cylinder's: its pieces meet at right angles). Where at most one of the pieces' values is
+/// positive the solid's distance is their largest; where only an edge's two are, in its region,
+/// the distance to the edge; near a corner, the distance to it. False for other pieces.
+bool solidEdges(const std::vector<Piece>& pieces, std::vector<Edge>& edges,
+                std::vector<std::array<std::size_t, 3>>& corners, std::vector<char>& perpendicular,
+                bool& square)
+{
+    edges.clear();
+    corners.clear();
+    const std::size_t np = pieces.size();
+    perpendicular.assign(np * np, 0);
+    square = false;
+    if (np == 3 && pieces[0].kind == Piece::Kind::Side && pieces[1].kind == Piece::Kind::Plane &&
+        pieces[2].kind == Piece::Kind::Plane) {
+        const Piece& side = pieces[0];
+        square = side.slope == 0.0;
+        for (std::size_t c = 1; c < 3; ++c) {
+            const Piece& cap = pieces[c];
+            const double along = dot(cap.n, side.n); // +-1: a cap is across the axis
+            if (std::abs(std::abs(along) - 1.0) > 1e-9) return false;
+            Edge e;
+            e.a = 0, e.b = c, e.rim = true;
+            e.origin = side.a, e.axis = side.n;
+            // The cap's plane n . q = offset: along the axis at s0 from origin.
+            e.capS = along > 0.0 ? 1.0 : -1.0;
+            e.s0 = e.capS * cap.offset - dot(side.n, side.a);
+            e.r0 = side.r + side.slope * e.s0;
+            e.sideS = -side.slope * side.cosine, e.sideR = side.cosine;
+            if (!(e.r0 >= 0.0)) return false;
+            edges.push_back(e);
+            perpendicular[c] = perpendicular[c * np] = square;
+        }
+        return true;
+    }
+    for (std::size_t i = 0; i < np; ++i) {
+        for (std::size_t k = i + 1; k < np; ++k) {
+            if (pieces[i].kind != Piece::Kind::Plane || pieces[k].kind != Piece::Kind::Plane) {
+                return false;
+            }
+            const double c = dot(pieces[i].n, pieces[k].n); // the cosine of their angle
+            if (std::abs(c) > 1.0 - 1e-9) continue;          // parallel: never both outside
+            if (std::abs(c) > 1e-9) return false;
+            perpendicular[i * np + k] = perpendicular[k * np + i] = 1;
+            Edge e;
+            e.a = i, e.b = k;
+            edges.push_back(e);
+        }
+    }
+    for (const Edge& e : edges) {
+        for (std::size_t l = e.b + 1; l < np; ++l) {
+            if (perpendicular[e.a * np + l] && perpendicular[e.b * np + l]) {
+                corners.push_back({e.a, e.b, l});
+            }
+        }
+    }
+    square = true;
+    return true;
+}
+
+/// A piece's field (a face's plane, a capped cone's side) as a shape: the signed distance to the
+/// half-space or the solid cone whose boundary holds it, exact in the solid the piece bounds
+/// near it; or the distance to an edge of a solid's pieces (a box's edge line, a capped
+/// cylinder's or cone's rim circle). The stand-in for a box or a capped cone in a blend's
+/// sheets (sheetFeet()).
+class PieceField final: public Implicit
+{
+public:
+    explicit PieceField(const Piece& piece): mPieces{piece} {}
+    PieceField(const std::vector<Piece>& pieces, const Edge& edge)
+        : mPieces(pieces), mEdge(edge), mIsEdge(true) {}
+    double value(const Vec3d& p) const override
+    {
+        return mIsEdge ? mEdge.distance(mPieces, p) : mPieces[0].value(p);
+    }
+    Vec3d gradient(const Vec3d& p) const override
+    {
+        return mIsEdge ? mEdge.gradient(mPieces, p) : mPieces[0].gradient(p);
+    }
+    /// 1-Lipschitz: the value at the centre, give or take half the diagonal.
+    Interval interval(const BBoxd& box) const override
+    {
+        const double v = value(box.getCenter()), r = 0.5 * (box.max() - box.min()).length();
+        return Interval(v - r, v + r);
+    }
+    BBoxd boundingBox() const override { return infiniteBox(); }
+    bool isExactSdf() const override { return true; }
+    std::string typeName() const override { return mIsEdge ? "edge" : "piece"; }
+
+private:
+    std::vector<Piece> mPieces;
+    Edge mEdge;
+    bool mIsEdge = false;
+};
+
+/// How far below a term a of @a n a blend's union form U can lie, where every other term
+/// exceeds a by @a gap: a - U <= log(1 + (n - 1) e^(-p gap)) / p for the super-elliptic blend;
+/// for the smooth minimum 0 beyond k (it folds from the left, each fold exact there), else of
+/// two k/4 h^2 (h = (k - gap) / k, and -gap more below 0), of more -gap and k/4 a fold.
+double dipAbove(const BlendKernel& kernel, std::size_t n, double gap)
+{
+    if (kernel.kind == BlendKernel::Kind::SuperElliptic) {
+        return std::log1p(double(n - 1) * std::exp(-kernel.p * gap)) / kernel.p;
+    }
+    if (gap >= kernel.k) return 0.0;
+    if (n == 2) {
+        const double h = (kernel.k - std::max(gap, 0.0)) / kernel.k;
+        return std::max(-gap, 0.0) + 0.25 * kernel.k * h * h;
+    }
+    return std::max(-gap, 0.0) + 0.25 * kernel.k * double(n - 1);
+}
+
+/// Of two terms, the other exceeding a by @a gap >= 0: how far below a the union form lies at
+/// least (exactly, for two).
+double dipBelow(const BlendKernel& kernel, double gap)
+{
+    if (kernel.kind == BlendKernel::Kind::SuperElliptic) {
+        return std::log1p(std::exp(-kernel.p * gap)) / kernel.p;
+    }
+    const double h = std::max(kernel.k - gap, 0.0) / kernel.k;
+    return 0.25 * kernel.k * h * h;
+}
+
+/// Certified distances near a kink of one child's distance, from the sheets the blend's surface
+/// is made of there (@a kinked points of @a blend, the children's @a pieces as
+/// Blend::nearerFeet() found them; @a done set where certified).
+///
+/// Child C, a box or a capped cone, is the largest of its pieces' values phi_j (each the exact
+/// distance to its plane or cone side) inside it and wherever at most one of them is positive
+/// (region R0: C itself, and face j's region where only phi_j is), and at least that largest
+/// everywhere; where only the two of an edge e are positive (R_e, of pieces meeting at right
+/// angles: rightAngles()) it is their hypot, the distance l_e to the edge. Within the ball B of
+/// radius r about p only the pieces within 2 r of the largest at p (J) can be the largest. The
+/// kernel U is increasing in every term, so with C's term s C (s = 1 in a union, -1 in an
+/// intersection) and no other child kinking in B, the blend in union form
+/// F = U(.., s C, ..) is, in B, the largest (s = 1) or the least (s = -1) of the face sheets
+/// G_j = U(.., s phi_j, ..) on R0, G_j on face j's region, and the edge sheet
+/// G_e = U(.., s l_e, ..) on R_e; each a smooth blend of exact SDFs whose distance d_j the
+/// blend's own rules certify. Every point y of B on the surface (F(y) = 0) lies
+/// - in R0, farther than the least d_j where F(p) s < 0 (p inside the sheets' intersection,
+///   or outside their union: on F's side of every sheet), else farther than the largest d_j of
+///   the sheets p is on F's side of (a crease where sheets meet), and:
+///   - s = 1, F(p) < 0: in face j's region, farther than d_j, than -phi_j(p) and than the
+///     other pieces' phi_m(p) (F < 0 on C's inside);
+///   - s = 1, F(p) > 0: on C (own(p)), or in face j's region, farther than the other pieces'
+///     phi_m(p), than d_j where p is on F's side of G_j, and than where phi_j <= tol or the
+///     other children's least term leads phi_j by less than the lead rule's margin (beyond
+///     both, G_j >= phi_j - tol > 0);
+///   - s = -1, F(p) < 0: on C (F < 0 on its faces' regions);
+/// - in R_e, farther than R_e, and than G_e's surface where p is on F's side of it;
+/// - farther than the corners' regions, and than r.
+/// The least of those bounds the distance below; the nearest point found on F's other side
+/// bounds it above (a sheet's; or the one @a out holds, r less the tolerance). Where they meet
+/// within the tolerance it is certified; elsewhere the lattice search goes on.
+void sheetFeet(const Blend& blend, const double* x, const double* y, const double* z,
+               const double* values, std::size_t n, const FootQuery& query,
+               const double* terms, const std::vector<std::vector<Piece>>& pieces,
+               const bool* kinked, FootPoints& out, bool* done)
+{
+    const auto& children = blend.children();
+    const std::size_t nc = children.size();
+    const double rho = blend.op() == Blend::Op::Union ? 1.0 : -1.0;
+    auto sign = [&](std::size_t c) {
+        return blend.op() == Blend::Op::Difference && c > 0 ? -1.0 : 1.0;
+    };
+    const double inf = std::numeric_limits<double>::infinity();
+    const BlendKernel& kernel = blend.kernel();
+    std::vector<std::vector<Edge>> edges(nc);
+    std::vector<std::vector<std::array<std::size_t, 3>>> corners(nc);
+    std::vector<std::vector<char>> perpendicular(nc);
+    std::vector<char> known(nc, 0), square(nc, 0);
+    std::size_t np = 0; // the most pieces of a child
+    for (std::size_t c = 0; c < nc; ++c) {
+        bool right = false;
+        known[c] = solidEdges(pieces[c], edges[c], corners[c], perpendicular[c], right);
+        square[c] = right;
+        np = std::max(np, pieces[c].size());
+    }
+    // Per point: the one child that kinks (nc: none, or not certifiable here), the ball's
+    // radius, the largest of that child's piece values, whether B lies inside C, the regions'
+    // and edge sheets' bound, C's term's sign s, whether every face sheet is on F's side
+    // (least), the other children's least term, and how far an edge's region's surface keeps
+    // from the edge (tube).
+    std::size_t kinker[kMaxBatch];
+    double radius[kMaxBatch], largest[kMaxBatch], regions[kMaxBatch], term[kMaxBatch],
+        second[kMaxBatch], tube[kMaxBatch];
+    bool inside[kMaxBatch], least[kMaxBatch];
+    bool any = false;
+    for (std::size_t i = 0; i < n; ++i) {
+        kinker[i] = nc;
+        if (!kinked[i]) continue;
+        const Vec3d p(x[i], y[i], z[i]);
+        const double r = (out.surface[i] ? std::abs(out.distance[i]) : query.far) + query.tolerance;
+        std::size_t found = nc;
+        bool several = false;
+        for (std::size_t c = 0; c < nc && !several; ++c) {
+            several = children[c]->mayKinkWithin(p, r);
+            double big = 0.0;
+            if (several) break;
+            if (pieces[c].empty() ||
+                !piecesKinkWithin(pieces[c], p, sign(c) * terms[c * n + i], r, &big)) {
+                continue;
+            }
+            several = found != nc;
+            found = c;
+            largest[i] = big;
+        }
+        if (several || found == nc || !detail::convexSdf(*children[found])) continue;
+        inside[i] = sign(found) * terms[found * n + i] + r <= 0.0; // no edge region in B
+        if (!inside[i] && !known[found]) continue;
+        regions[i] = r;
+        if (!inside[i]) {
+            for (const auto& v : corners[found]) {
+                double s2 = 0.0;
+                for (std::size_t j : v) {
+                    s2 += std::pow(std::max(-pieces[found][j].value(p), 0.0), 2);
+                }
+                regions[i] = std::min(regions[i], std::sqrt(s2));
+            }
+        }
+        kinker[i] = found;
+        radius[i] = r;
+        term[i] = rho * sign(found);
+        least[i] = term[i] * rho * values[i] < 0.0;
+        second[i] = inf;
+        for (std::size_t o = 0; o < nc; ++o) {
+            if (o != found) second[i] = std::min(second[i], rho * terms[o * n + i]);
+        }
+        // s = 1, F(p) < 0, of two: on an edge's region F >= 0 needs l_e >= tau with
+        // U(tau, b) = 0, and b <= b(p) + r in B, so tau >= the dip below at that gap.
+        tube[i] = term[i] > 0.0 && least[i] && nc == 2 && square[found]
+            ? dipBelow(kernel, second[i] + r)
+            : 0.0;
+        any = true;
+    }
+    if (!any) return;
+    // Per point and piece of the kinking child: the face sheet's distance d_j (or a bound below
+    // it), NaN where it is not in J; whether p is on F's side of it.
+    std::vector<double> sheetDistance(n * np, std::numeric_limits<double>::quiet_NaN());
+    std::vector<char> sheetSide(n * np, 0);
+    double best[kMaxBatch], bx[kMaxBatch], by[kMaxBatch], bz[kMaxBatch];
+    for (std::size_t i = 0; i < n; ++i) {
+        best[i] = out.surface[i] ? std::abs(out.distance[i]) : inf;
+        bx[i] = out.x[i], by[i] = out.y[i], bz[i] = out.z[i];
+    }
+    // A point @a q found for point i: a bound above where F is on the other side of it, within
+    // the tolerance.
+    auto offer = [&](std::size_t i, const Vec3d& q) {
+        const double d = (q - Vec3d(x[i], y[i], z[i])).length();
+        if (!(d < best[i])) return;
+        const double beyond = values[i] > 0.0 ? blend.value(q) : -blend.value(q);
+        if (beyond > 0.0 && !(beyond <= query.tolerance * blend.gradient(q).length())) return;
+        best[i] = d;
+        bx[i] = q[0], by[i] = q[1], bz[i] = q[2];
+    };
+    // The sheet of child c with @a field in its place, at the points @a wanted says (with the
+    // distance to the region where it holds, 0 for a face sheet); face sheet j's (@a j < np)
+    // distances to sheetDistance, an edge sheet's (@a j = np) bound to regions.
+    auto sheetAt = [&](std::size_t c, std::size_t j, const Implicit::Ptr& field, auto&& wanted) {
+        std::size_t idx[kMaxBatch], m = 0;
+        double px[kMaxBatch], py[kMaxBatch], pz[kMaxBatch], region[kMaxBatch];
+        for (std::size_t i = 0; i < n; ++i) {
+            if (kinker[i] != c || !wanted(i, region[m])) continue;
+            idx[m] = i;
+            px[m] = x[i], py[m] = y[i], pz[m++] = z[i];
+        }
+        if (m == 0) return;
+        std::vector<Implicit::Ptr> sheetChildren = children;
+        sheetChildren[c] = field;
+        const auto sheet =
+            std::make_shared<Blend>(blend.op(), blend.kernel(), std::move(sheetChildren));
+        double sv[kMaxBatch];
+        FootPoints feet;
+        FootQuery withFeet = query;
+        withFeet.feet = true; // the points bound the distance above
+        sheet->valuesAndFootPoints(px, py, pz, m, withFeet, sv, feet);
+        for (std::size_t k = 0; k < m; ++k) {
+            const std::size_t i = idx[k];
+            // The sheet's distance where certified at a foot point, else a bound below it
+            // (it is 1-Lipschitz): an answer without one is only said to be far, and the
+            // first-order estimate that says so can be far too large where the sheet's
+            // gradient is small (a valley between a cap's plane and the other child).
+            const bool foot =
+                feet.ok[k] && (feet.x[k] != px[k] || feet.y[k] != py[k] || feet.z[k] != pz[k]);
+            const double d = foot ? std::abs(feet.distance[k]) : std::abs(sv[k]);
+            const bool side = (sv[k] > 0.0) == (values[i] > 0.0); // p on F's side of it
+            if (j == np) {
+                regions[i] = std::min(regions[i], std::max(region[k], side ? d : 0.0));
+            } else {
+                sheetDistance[i * np + j] = d;
+                sheetSide[i * np + j] = side;
+            }
+            // A point of the sheet's surface, certified or not (a rim of the edge sheet too
+            // tight for the iteration), bounds the distance above where F is past it too.
+            if (feet.ok[k] || feet.surface[k]) offer(i, Vec3d(feet.x[k], feet.y[k], feet.z[k]));
+        }
+    };
+    for (std::size_t c = 0; c < nc; ++c) {
+        for (std::size_t j = 0; j < pieces[c].size(); ++j) {
+            const Piece& piece = pieces[c][j];
+            sheetAt(c, j, std::make_shared<PieceField>(piece), [&](std::size_t i, double& region) {
+                region = 0.0;
+                return piece.value(Vec3d(x[i], y[i], z[i])) >= largest[i] - 2.0 * radius[i];
+            });
+        }
+        for (const Edge& e : edges[c]) {
+            const Piece &a = pieces[c][e.a], &b = pieces[c][e.b];
+            const auto field = std::make_shared<PieceField>(pieces[c], e);
+            sheetAt(c, np, field, [&](std::size_t i, double& region) {
+                if (inside[i]) return false;
+                const Vec3d p(x[i], y[i], z[i]);
+                region = e.regionDistance(pieces[c], p);
+                // From inside both pieces at right angles, a point beyond the edge at l_e >= tau
+                // is at least hypot(region, tau) away.
+                if (a.value(p) <= 0.0 && b.value(p) <= 0.0) region = std::hypot(region, tube[i]);
+                return region < radius[i];
+            });
+            // The edge's own point nearest p (where the sheet's foot points, on the edge, have
+            // no normal: a sharp edge of the surface).
+            for (std::size_t i = 0; i < n; ++i) {
+                if (kinker[i] != c || inside[i]) continue;
+                const Vec3d p(x[i], y[i], z[i]);
+                if (!(e.distance(pieces[c], p) < best[i])) continue;
+                if (!e.rim) {
+                    const double va = a.value(p), vb = b.value(p);
+                    offer(i, p - a.gradient(p) * va - b.gradient(p) * vb);
+                    continue;
+                }
+                double sp, rp;
+                Vec3d radial;
+                e.meridian(p, sp, rp, radial);
+                if (rp > 0.0) offer(i, e.origin + e.axis * e.s0 + radial * e.r0);
+            }
+        }
+    }
+    double phi[8];
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t c = kinker[i];
+        if (c == nc) continue;
+        const Vec3d p(x[i], y[i], z[i]);
+        const std::vector<Piece>& ps = pieces[c];
+        for (std::size_t j = 0; j < ps.size(); ++j) phi[j] = ps[j].value(p);
+        const double s = term[i], f = rho * values[i]; // C's term is s C; F(p)
+        const double own = sign(c) * terms[c * n + i];
+        // R0: the sheets' own bound (the least, or the largest on F's side), and by regions
+        // (of pieces at right angles: the distance to where some of their values are at most
+        // some bounds is the hypot of p's excesses).
+        double sheets = least[i] ? inf : 0.0, split = s > 0.0 && f > 0.0 ? std::max(own, 0.0) : inf;
+        if (s > 0.0 && !square[c]) split = 0.0; // no bound by regions (a cone's side and cap)
+        for (std::size_t j = 0; j < ps.size(); ++j) {
+            const double d = sheetDistance[i * np + j];
+            if (std::isnan(d)) continue; // not in J
+            if (least[i]) sheets = std::min(sheets, d);
+            else if (sheetSide[i * np + j]) sheets = std::max(sheets, d);
+            if (s < 0.0 || !square[c]) continue;
+            // Face j's region: the other pieces' values at most 0 there (at most one of each
+            // parallel pair above 0 at p; a piece parallel to j bounds along j's normal).
+            double others = 0.0, along = 0.0;
+            for (std::size_t m = 0; m < ps.size(); ++m) {
+                if (m == j) continue;
+                if (perpendicular[c][j * ps.size() + m]) {
+                    others += std::pow(std::max(phi[m], 0.0), 2);
+                } else {
+                    along = std::max(along, phi[m]);
+                }
+            }
+            double region;
+            if (f < 0.0) {
+                // F >= 0 there needs phi_j >= 0 (F < 0 on C).
+                region = std::max(d, std::sqrt(others + std::pow(std::max(-phi[j], along), 2)));
+            } else {
+                // G_j <= 0 needs phi_j <= the dip where the other terms lead phi_j, by at
+                // least their lead at p less 2 r in B.
+                const double dip = dipAbove(kernel, nc, second[i] - phi[j] - 2.0 * radius[i]);
+                region = std::sqrt(others + std::pow(std::max(phi[j] - dip, along), 2));
+                if (sheetSide[i * np + j]) region = std::max(region, d);
+            }
+            split = std::min(split, region);
+        }
+        if (s < 0.0 && f < 0.0) split = std::max(own, 0.0); // F < 0 on the faces' regions
+        const double faces = s < 0.0 && f > 0.0 ? sheets : std::max(sheets, split);
+        const double below = std::min({faces, regions[i], radius[i]});
+        if (!std::isfinite(best[i]) && below >= query.far) {
+            // Farther than far from the surface: all that is asked there.
+            out.ok[i] = true;
+            out.surface[i] = false;
+            out.distance[i] = std::copysign(below, values[i]);
+            out.x[i] = x[i], out.y[i] = y[i], out.z[i] = z[i];
+            done[i] = true;
+            continue;
+        }
+        if (!(best[i] <= below + query.tolerance)) continue;
+        out.ok[i] = true;
+        out.surface[i] = false;
+        out.distance[i] = std::copysign(best[i], values[i]);
+        out.x[i] = bx[i], out.y[i] = by[i], out.z[i] = bz[i];
+        done[i] = true;
+    }
+}
+
 /// Of two convex functions a and b with values @a fa, @a fb and gradients @a ga, @a gb at @a x:
 /// how near @a p a point where both are 0 can be. Such a point q lies in both half-spaces
 /// a(x) + ga . (q - x) <= 0 and b(x) + gb . (q - x) <= 0 (each function lies above its tangent
@@ -1972,10 +2448,12 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     // nearest point of the surface where the field is smooth about p, but one of several where
     // a child's distance kinks within |p - q| of p, and there the nearest is often across the
     // kink (up to 0.44 voxel nearer, inside a box's smooth intersection with a sphere). Those
-    // answers are left uncertified, for the lattice search, q a point of the surface all the
-    // same; the faces within reach of the largest offer starts of their own below.
+    // answers are uncertified, q a point of the surface all the same. Where the kink is one
+    // child's, the blend's sheets there (sheetFeet()) certify most of them; the others go to
+    // the lattice search, the faces within reach of the largest offering starts of their own
+    // below.
     std::vector<std::vector<Piece>> pieces(nc);
-    bool kinked[kMaxBatch] = {};
+    bool kinked[kMaxBatch] = {}, anyKinked = false;
     for (std::size_t c = 0; c < nc; ++c) {
         if (!pieceParts(*mChildren[c], pieces[c])) continue;
         for (std::size_t i = 0; i < n; ++i) {
@@ -1985,10 +2463,17 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
                                   reach + query.tolerance)) {
                 continue;
             }
-            kinked[i] = true;
-            if (out.ok[i]) out.ok[i] = false, out.surface[i] = true;
+            kinked[i] = anyKinked = true;
+            if (!out.ok[i]) continue;
+            // A certified foot point is a point of the surface; a far answer (the first-order
+            // estimate, no foot point) is not.
+            out.ok[i] = false;
+            out.surface[i] = out.x[i] != x[i] || out.y[i] != y[i] || out.z[i] != z[i];
         }
     }
+    // Where the sheets certify the distance, nothing more is asked.
+    bool done[kMaxBatch] = {};
+    if (anyKinked) sheetFeet(*this, x, y, z, values, n, query, terms, pieces, kinked, out, done);
     // Other points of the surface: the smooth iteration from each child's own foot point,
     // p - f_c grad f_c (exact SDFs), which finds the part of the surface near that child's
     // nearest point, Newton's method where the rounds fail (a rim rounded tightly by the
@@ -2024,11 +2509,12 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     if (nc == 2) {
         for (std::size_t i = 0; i < n; ++i) {
             const bool valley = std::abs(terms[i] - terms[n + i]) < 2.0 * std::abs(out.distance[i]);
-            asked[i] = !led[i] && std::abs(values[i]) < query.far && (!out.ok[i] || valley);
+            asked[i] = !led[i] && !done[i] && std::abs(values[i]) < query.far &&
+                       (!out.ok[i] || valley);
         }
     } else {
         for (std::size_t i = 0; i < n; ++i) {
-            asked[i] = !led[i] && std::abs(values[i]) < query.far && !out.ok[i];
+            asked[i] = !led[i] && !done[i] && std::abs(values[i]) < query.far && !out.ok[i];
         }
     }
     for (std::size_t i = 0; i < n; ++i) {

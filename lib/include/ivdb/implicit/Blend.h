@@ -158,10 +158,11 @@ private:
                       std::size_t n, const FootQuery& query, const double* terms,
                       const double* cg, double* w, bool haveWeights, FootPoints& out) const;
     /// For the points @a out leaves to the smooth iteration (not @a led by a child): its answers
-    /// uncertified where a child may kink within their distance (mayKinkWithin()), and nearer
-    /// points of the surface from each child's own foot point (and each face's, near a kink)
-    /// where the iteration is not certified, and from the other child's where a certified foot
-    /// point may be one of two.
+    /// uncertified where a child may kink within their distance (mayKinkWithin()), then
+    /// certified from the blend's sheets where the kink is one box's or capped cone's (the
+    /// blend with one of its faces or edges in its place), and nearer points of the surface
+    /// from each child's own foot point (and each face's, near a kink) where still not
+    /// certified, and from the other child's where a certified foot point may be one of two.
     void nearerFeet(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, const double* terms, const bool* led,
                     FootPoints& out) const;
