@@ -1354,8 +1354,10 @@ TEST_F(TestTrueDistances, BlendOfABoxIsTheDistanceAtItsRoundedEdges)
                 (unsigned long long)stats.localDistances,
                 (unsigned long long)(stats.searchedDistances + stats.approximateDistances),
                 (unsigned long long)stats.approximateDistances);
-    // None swept. The box's inside, where its distance kinks (Blend::mayKinkWithin()), goes
-    // to the lattice search, its answers approximate but bounded by the surface points found
+    // None swept. The box's inside, where its distance kinks (Blend::mayKinkWithin()), is
+    // certified from the blend's sheets where it can be
+    // (BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheirKinks); the rest goes to the
+    // lattice search, its answers approximate but bounded by the surface points found
     // (BlendsOfCappedShapesAreNoFartherThanTheirSurfaces).
     EXPECT_EQ(stats.sweptDistances, 0u);
     // The reference: the blend written out here (box and sphere closed forms, the kernel's
@@ -1928,7 +1930,7 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheir
     // the other sign: a surface point that far) by more than 0.002 voxel (twice the tolerance;
     // measured 0.0000 at most), and at least 95%, 95%, 93% and 92% are certified: measured 98%,
     // 98%, 96% and 95%, against 77%, 52%, 79% and 76% without the sheets (the lead rule's). The
-    // rasterizer's lattice searches: 623, 1,115, 4,982 and 1,605 of the band's voxels, against
+    // rasterizer's lattice searches: 597, 992, 4,982 and 1,603 of the band's voxels, against
     // 2,732, 4,583, 7,870 and 2,199 without the sheets.
     const double dx = 0.02, tolerance = 1e-3 * dx, far = 3.0 * dx;
     using implicit::Implicit;

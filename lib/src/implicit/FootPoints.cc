@@ -750,6 +750,29 @@ private:
     bool mIsEdge = false;
 };
 
+/// Of a capped cone (its @a pieces and two @a rims, solidEdges()): how far @a p is from where
+/// piece j's value lies in [@a lo, @a hi] and its nearest point is on the piece's own part (the
+/// side's segment between the rims, a cap's disc): in the half-plane through the axis, a
+/// rectangle in the piece's own frame (along it and along its normal).
+double coneFaceDistance(const std::vector<Piece>& pieces, const std::vector<Edge>& rims,
+                        std::size_t j, const Vec3d& p, double lo, double hi)
+{
+    double s, r;
+    Vec3d radial;
+    rims[0].meridian(p, s, r, radial);
+    const double v = pieces[j].value(p);
+    double t, t0, t1;
+    if (j == 0) { // the side, along it (its unit tangent (sideR, -sideS)) from the first rim
+        const Edge &a = rims[0], &b = rims[1];
+        auto along = [&](double ss, double rr) { return (ss - a.s0) * a.sideR - (rr - a.r0) * a.sideS; };
+        t = along(s, r);
+        t0 = std::min(0.0, along(b.s0, b.r0)), t1 = std::max(0.0, along(b.s0, b.r0));
+    } else { // a cap, across the axis out to its rim
+        t = r, t0 = 0.0, t1 = rims[j - 1].r0;
+    }
+    return std::hypot(std::max({t0 - t, t - t1, 0.0}), std::max({lo - v, v - hi, 0.0}));
+}
+
 /// How far below a term a of @a n a blend's union form U can lie, where every other term
 /// exceeds a by @a gap: a - U <= log(1 + (n - 1) e^(-p gap)) / p for the super-elliptic blend;
 /// for the smooth minimum 0 beyond k (it folds from the left, each fold exact there), else of
@@ -1003,13 +1026,30 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
         // (of pieces at right angles: the distance to where some of their values are at most
         // some bounds is the hypot of p's excesses).
         double sheets = least[i] ? inf : 0.0, split = s > 0.0 && f > 0.0 ? std::max(own, 0.0) : inf;
-        if (s > 0.0 && !square[c]) split = 0.0; // no bound by regions (a cone's side and cap)
+        // A capped cone's pieces need not meet at right angles: its faces' regions are
+        // rectangles in the half-plane through the axis.
+        const bool cone = !square[c] && edges[c].size() == 2 && edges[c][0].rim;
+        if (s > 0.0 && !square[c] && !cone) split = 0.0; // no bound by regions
         for (std::size_t j = 0; j < ps.size(); ++j) {
             const double d = sheetDistance[i * np + j];
             if (std::isnan(d)) continue; // not in J
             if (least[i]) sheets = std::min(sheets, d);
             else if (sheetSide[i * np + j]) sheets = std::max(sheets, d);
-            if (s < 0.0 || !square[c]) continue;
+            if (s < 0.0 || (!square[c] && !cone)) continue;
+            // G_j <= 0 needs phi_j at most the dip where the other terms lead phi_j: by their
+            // lead at p less 2 r in B, and so, where phi_j is at most that dip, by the other
+            // terms' least at p less r and the dip.
+            double dip = dipAbove(kernel, nc, second[i] - phi[j] - 2.0 * radius[i]);
+            dip = std::min(dip, dipAbove(kernel, nc, second[i] - radius[i] - dip));
+            if (cone) {
+                // F >= 0 in face j's region needs G_j >= 0 (F < 0 on C); F <= 0 needs phi_j at
+                // most the dip.
+                double region = f < 0.0 ? std::max(d, coneFaceDistance(ps, edges[c], j, p, 0.0, inf))
+                                        : coneFaceDistance(ps, edges[c], j, p, 0.0, dip);
+                if (f > 0.0 && sheetSide[i * np + j]) region = std::max(region, d);
+                split = std::min(split, region);
+                continue;
+            }
             // Face j's region: the other pieces' values at most 0 there (at most one of each
             // parallel pair above 0 at p; a piece parallel to j bounds along j's normal).
             double others = 0.0, along = 0.0;
@@ -1026,9 +1066,6 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
                 // F >= 0 there needs phi_j >= 0 (F < 0 on C).
                 region = std::max(d, std::sqrt(others + std::pow(std::max(-phi[j], along), 2)));
             } else {
-                // G_j <= 0 needs phi_j <= the dip where the other terms lead phi_j, by at
-                // least their lead at p less 2 r in B.
-                const double dip = dipAbove(kernel, nc, second[i] - phi[j] - 2.0 * radius[i]);
                 region = std::sqrt(others + std::pow(std::max(phi[j] - dip, along), 2));
                 if (sheetSide[i * np + j]) region = std::max(region, d);
             }
