@@ -465,6 +465,23 @@ struct Piece
     }
 };
 
+/// The six face planes of the box of centre @a c and half size @a h, appended to @a out.
+void boxPlanes(const Vec3d& c, const Vec3d& h, std::vector<Piece>& out)
+{
+    for (int k = 0; k < 3; ++k) {
+        Piece plus, minus;
+        plus.kind = minus.kind = Piece::Kind::Plane;
+        plus.convex = minus.convex = true;
+        plus.n = minus.n = Vec3d(0.0);
+        plus.n[k] = 1.0;
+        plus.offset = c[k] + h[k];
+        minus.n[k] = -1.0;
+        minus.offset = h[k] - c[k];
+        out.push_back(plus);
+        out.push_back(minus);
+    }
+}
+
 /// A CSG term with more pieces than this (eight boxes) is searched whole.
 constexpr std::size_t kMaxTermPieces = 48;
 
@@ -478,19 +495,7 @@ constexpr std::size_t kMaxTermPieces = 48;
 bool pieceParts(const Implicit& f, std::vector<Piece>& out)
 {
     if (const auto* box = dynamic_cast<const Box*>(&f)) {
-        const Vec3d c = box->center(), h = box->size() * 0.5;
-        for (int k = 0; k < 3; ++k) {
-            Piece plus, minus;
-            plus.kind = minus.kind = Piece::Kind::Plane;
-            plus.convex = minus.convex = true;
-            plus.n = minus.n = Vec3d(0.0);
-            plus.n[k] = 1.0;
-            plus.offset = c[k] + h[k];
-            minus.n[k] = -1.0;
-            minus.offset = h[k] - c[k];
-            out.push_back(plus);
-            out.push_back(minus);
-        }
+        boxPlanes(box->center(), box->size() * 0.5, out);
         return true;
     }
     if (const auto* cone = dynamic_cast<const CappedCone*>(&f)) {
@@ -559,6 +564,31 @@ bool pieceParts(const Implicit& f, std::vector<Piece>& out)
     return false;
 }
 
+/// The pieces whose values tell where @a f's distance may kink (piecesKinkWithin()):
+/// pieceParts(), and of a rounded box (moved rigidly or scaled uniformly) its outer box's faces,
+/// with @a round its radius (else 0): inside the box it rounds, its distance is the largest of
+/// those, so it kinks where they tie; the rounded part is smooth (solidEdges()). False for
+/// none.
+bool kinkPieces(const Implicit& f, std::vector<Piece>& out, double& round)
+{
+    round = 0.0;
+    if (pieceParts(f, out)) return true;
+    if (const auto* rounded = dynamic_cast<const RoundedBox*>(&f)) {
+        boxPlanes(rounded->center(), rounded->size() * 0.5, out);
+        round = rounded->radius();
+        return true;
+    }
+    const std::size_t before = out.size();
+    if (const auto* t = dynamic_cast<const Transform*>(&f)) {
+        const double s = t->uniformScale();
+        if (!(s > 0.0) || !kinkPieces(*t->child(), out, round)) return false;
+        for (std::size_t k = before; k < out.size(); ++k) out[k].move(*t, s);
+        round *= s;
+        return true;
+    }
+    return false;
+}
+
 /// Of the exact SDF made of @a pieces (pieceParts() of a box or a capped cone), whose value at
 /// @a p is @a own: the largest of its pieces' values at @a p, and whether it may kink within
 /// @a radius of @a p. Outside a convex solid its distance is smooth (C1); inside, it is the
@@ -580,13 +610,15 @@ bool piecesKinkWithin(const std::vector<Piece>& pieces, const Vec3d& p, double o
 }
 
 /// An edge where two pieces of a convex solid meet: two of a box's faces (at right angles, along
-/// a line), or a capped cylinder's or cone's side and a cap (a rim circle). Outside the solid,
-/// where its nearest point is on the edge (the edge's region), its distance is the distance to
-/// the edge.
+/// a line; or three at a corner), or a capped cylinder's or cone's side and a cap (a rim
+/// circle). Outside the solid, where its nearest point is on the edge (the edge's region), its
+/// distance is the distance to the edge.
 struct Edge
 {
     std::size_t a = 0, b = 0;   // the pieces (a rim: the side, then the cap)
-    bool rim = false;
+    std::size_t c = 0;          // a box's corner: its third piece
+    bool rim = false, corner = false;
+    double round = 0.0;         // a rounded box's: its faces' planes less this meet on the edge
     Vec3d origin, axis;         // rim: the axis, s measured along it from origin
     double s0 = 0.0, r0 = 0.0;  // rim: the circle's place on the axis and its radius
     double capS = 1.0;          // rim: the cap's outward normal, (capS, 0) in (s, rho)
@@ -601,10 +633,13 @@ struct Edge
         r = radial.length();
         radial = r > 0.0 ? radial / r : Vec3d(0.0);
     }
-    /// The distance from @a p to the edge.
+    /// The distance from @a p to the edge (to the cylinder of radius round about it).
     double distance(const std::vector<Piece>& pieces, const Vec3d& p) const
     {
-        if (!rim) return std::hypot(pieces[a].value(p), pieces[b].value(p));
+        if (!rim) {
+            const double w = corner ? pieces[c].value(p) + round : 0.0;
+            return std::hypot(pieces[a].value(p) + round, pieces[b].value(p) + round, w) - round;
+        }
         double s, r;
         Vec3d radial;
         meridian(p, s, r, radial);
@@ -612,19 +647,20 @@ struct Edge
     }
     Vec3d gradient(const std::vector<Piece>& pieces, const Vec3d& p) const
     {
-        double u, v;
-        Vec3d du, dv;
+        double u, v, w = 0.0;
+        Vec3d du, dv, dw(0.0);
         if (!rim) {
-            u = pieces[a].value(p), v = pieces[b].value(p);
+            u = pieces[a].value(p) + round, v = pieces[b].value(p) + round;
             du = pieces[a].gradient(p), dv = pieces[b].gradient(p);
+            if (corner) w = pieces[c].value(p) + round, dw = pieces[c].gradient(p);
         } else {
             double s, r;
             meridian(p, s, r, dv);
             u = s - s0, v = r - r0, du = axis;
         }
-        const double len = std::hypot(u, v);
+        const double len = std::hypot(u, v, w);
         if (!(len > 0.0)) return Vec3d(0.0); // on the edge: no normal
-        return (du * u + dv * v) / len;
+        return (du * u + dv * v + dw * w) / len;
     }
     /// How far @a p is from the edge's region: where two faces of a box at right angles are
     /// both >= 0; for a rim, the wedge of the two outward normals at the circle, in the
@@ -632,8 +668,9 @@ struct Edge
     double regionDistance(const std::vector<Piece>& pieces, const Vec3d& p) const
     {
         if (!rim) {
-            return std::hypot(std::max(-pieces[a].value(p), 0.0),
-                              std::max(-pieces[b].value(p), 0.0));
+            return std::hypot(std::max(-pieces[a].value(p) - round, 0.0),
+                              std::max(-pieces[b].value(p) - round, 0.0),
+                              corner ? std::max(-pieces[c].value(p) - round, 0.0) : 0.0);
         }
         double s, r;
         Vec3d radial;
@@ -653,18 +690,19 @@ struct Edge
 };
 
 /// The edges and corners of a convex solid made of @a pieces (pieceParts()): a box's twelve
-/// edges (pairs of faces at right angles) and eight corners (triples), with @a perpendicular
-/// (row-major, pieces by pieces: which pairs meet at right angles, the others parallel) and
-/// @a square true; a capped cylinder's or cone's two rims (@a square true only for a
-/// cylinder's: its pieces meet at right angles). Where at most one of the pieces' values is
+/// edges (pairs of faces at right angles) and eight corners (triples, Edge::corner), with
+/// @a perpendicular (row-major, pieces by pieces: which pairs meet at right angles, the others
+/// parallel) and @a square true; a capped cylinder's or cone's two rims (@a square true only for
+/// a cylinder's: its pieces meet at right angles). Where at most one of the pieces' values is
 /// positive the solid's distance is their largest; where only an edge's two are, in its region,
-/// the distance to the edge; near a corner, the distance to it. False for other pieces.
-bool solidEdges(const std::vector<Piece>& pieces, std::vector<Edge>& edges,
-                std::vector<std::array<std::size_t, 3>>& corners, std::vector<char>& perpendicular,
-                bool& square)
+/// the distance to the edge; near a corner, the distance to it. A rounded box's pieces are its
+/// outer box's faces and @a round its radius: the same with every "positive" read as "above
+/// -round", and the distances to its edges and corners those to cylinders and balls of that
+/// radius (Edge::round). False for other pieces.
+bool solidEdges(const std::vector<Piece>& pieces, double round, std::vector<Edge>& edges,
+                std::vector<char>& perpendicular, bool& square)
 {
     edges.clear();
-    corners.clear();
     const std::size_t np = pieces.size();
     perpendicular.assign(np * np, 0);
     square = false;
@@ -700,14 +738,18 @@ bool solidEdges(const std::vector<Piece>& pieces, std::vector<Edge>& edges,
             if (std::abs(c) > 1e-9) return false;
             perpendicular[i * np + k] = perpendicular[k * np + i] = 1;
             Edge e;
-            e.a = i, e.b = k;
+            e.a = i, e.b = k, e.round = round;
             edges.push_back(e);
         }
     }
-    for (const Edge& e : edges) {
+    const std::size_t pairs = edges.size();
+    for (std::size_t k = 0; k < pairs; ++k) {
+        const Edge e = edges[k];
         for (std::size_t l = e.b + 1; l < np; ++l) {
             if (perpendicular[e.a * np + l] && perpendicular[e.b * np + l]) {
-                corners.push_back({e.a, e.b, l});
+                Edge v = e;
+                v.c = l, v.corner = true;
+                edges.push_back(v);
             }
         }
     }
@@ -803,7 +845,8 @@ double dipBelow(const BlendKernel& kernel, double gap)
 
 /// Certified distances near a kink of one child's distance, from the sheets the blend's surface
 /// is made of there (@a kinked points of @a blend, the children's @a pieces as
-/// Blend::nearerFeet() found them; @a done set where certified).
+/// Blend::nearerFeet() found them, with a rounded box's radius in @a rounds; @a done set where
+/// certified).
 ///
 /// Child C, a box or a capped cone, is the largest of its pieces' values phi_j (each the exact
 /// distance to its plane or cone side) inside it and wherever at most one of them is positive
@@ -828,14 +871,14 @@ double dipBelow(const BlendKernel& kernel, double gap)
 ///     both, G_j >= phi_j - tol > 0);
 ///   - s = -1, F(p) < 0: on C (F < 0 on its faces' regions);
 /// - in R_e, farther than R_e, and than G_e's surface where p is on F's side of it;
-/// - farther than the corners' regions, and than r.
+/// - farther than the corners' regions, or their sheets likewise, and than r.
 /// The least of those bounds the distance below; the nearest point found on F's other side
 /// bounds it above (a sheet's; or the one @a out holds, r less the tolerance). Where they meet
 /// within the tolerance it is certified; elsewhere the lattice search goes on.
 void sheetFeet(const Blend& blend, const double* x, const double* y, const double* z,
                const double* values, std::size_t n, const FootQuery& query,
                const double* terms, const std::vector<std::vector<Piece>>& pieces,
-               const bool* kinked, FootPoints& out, bool* done)
+               const std::vector<double>& rounds, const bool* kinked, FootPoints& out, bool* done)
 {
     const auto& children = blend.children();
     const std::size_t nc = children.size();
@@ -846,13 +889,12 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
     const double inf = std::numeric_limits<double>::infinity();
     const BlendKernel& kernel = blend.kernel();
     std::vector<std::vector<Edge>> edges(nc);
-    std::vector<std::vector<std::array<std::size_t, 3>>> corners(nc);
     std::vector<std::vector<char>> perpendicular(nc);
     std::vector<char> known(nc, 0), square(nc, 0);
     std::size_t np = 0; // the most pieces of a child
     for (std::size_t c = 0; c < nc; ++c) {
         bool right = false;
-        known[c] = solidEdges(pieces[c], edges[c], corners[c], perpendicular[c], right);
+        known[c] = solidEdges(pieces[c], rounds[c], edges[c], perpendicular[c], right);
         square[c] = right;
         np = std::max(np, pieces[c].size());
     }
@@ -886,18 +928,10 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
             largest[i] = big;
         }
         if (several || found == nc || !detail::convexSdf(*children[found])) continue;
-        inside[i] = sign(found) * terms[found * n + i] + r <= 0.0; // no edge region in B
+        // No edge region in B (a rounded box's reach inside it by its radius).
+        inside[i] = sign(found) * terms[found * n + i] + r + rounds[found] <= 0.0;
         if (!inside[i] && !known[found]) continue;
         regions[i] = r;
-        if (!inside[i]) {
-            for (const auto& v : corners[found]) {
-                double s2 = 0.0;
-                for (std::size_t j : v) {
-                    s2 += std::pow(std::max(-pieces[found][j].value(p), 0.0), 2);
-                }
-                regions[i] = std::min(regions[i], std::sqrt(s2));
-            }
-        }
         kinker[i] = found;
         radius[i] = r;
         term[i] = rho * sign(found);
@@ -908,7 +942,7 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
         }
         // s = 1, F(p) < 0, of two: on an edge's region F >= 0 needs l_e >= tau with
         // U(tau, b) = 0, and b <= b(p) + r in B, so tau >= the dip below at that gap.
-        tube[i] = term[i] > 0.0 && least[i] && nc == 2 && square[found]
+        tube[i] = term[i] > 0.0 && least[i] && nc == 2 && square[found] && rounds[found] == 0.0
             ? dipBelow(kernel, second[i] + r)
             : 0.0;
         any = true;
@@ -1002,8 +1036,18 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
                 const Vec3d p(x[i], y[i], z[i]);
                 if (!(e.distance(pieces[c], p) < best[i])) continue;
                 if (!e.rim) {
-                    const double va = a.value(p), vb = b.value(p);
-                    offer(i, p - a.gradient(p) * va - b.gradient(p) * vb);
+                    // On the line (or the corner) where the planes moved in by round meet,
+                    // then out by round.
+                    const double va = a.value(p) + e.round, vb = b.value(p) + e.round;
+                    Vec3d q = p - a.gradient(p) * va - b.gradient(p) * vb;
+                    if (e.corner) {
+                        const Piece& third = pieces[c][e.c];
+                        q -= third.gradient(p) * (third.value(p) + e.round);
+                    }
+                    const double len = (p - q).length();
+                    if (e.round == 0.0 || len > 0.0) {
+                        offer(i, q + (p - q) * (e.round / std::max(len, 1e-300)));
+                    }
                     continue;
                 }
                 double sp, rp;
@@ -1055,10 +1099,12 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
             double others = 0.0, along = 0.0;
             for (std::size_t m = 0; m < ps.size(); ++m) {
                 if (m == j) continue;
+                // (A rounded box's: at most -round.)
+                const double over = phi[m] + rounds[c];
                 if (perpendicular[c][j * ps.size() + m]) {
-                    others += std::pow(std::max(phi[m], 0.0), 2);
+                    others += std::pow(std::max(over, 0.0), 2);
                 } else {
-                    along = std::max(along, phi[m]);
+                    along = std::max(along, over);
                 }
             }
             double region;
@@ -2490,9 +2536,10 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     // the lattice search, the faces within reach of the largest offering starts of their own
     // below.
     std::vector<std::vector<Piece>> pieces(nc);
+    std::vector<double> rounds(nc, 0.0);
     bool kinked[kMaxBatch] = {}, anyKinked = false;
     for (std::size_t c = 0; c < nc; ++c) {
-        if (!pieceParts(*mChildren[c], pieces[c])) continue;
+        if (!kinkPieces(*mChildren[c], pieces[c], rounds[c])) continue;
         for (std::size_t i = 0; i < n; ++i) {
             if (led[i] || std::abs(values[i]) >= query.far) continue;
             const double reach = out.ok[i] ? std::abs(out.distance[i]) : query.far;
@@ -2510,7 +2557,9 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     }
     // Where the sheets certify the distance, nothing more is asked.
     bool done[kMaxBatch] = {};
-    if (anyKinked) sheetFeet(*this, x, y, z, values, n, query, terms, pieces, kinked, out, done);
+    if (anyKinked) {
+        sheetFeet(*this, x, y, z, values, n, query, terms, pieces, rounds, kinked, out, done);
+    }
     // Other points of the surface: the smooth iteration from each child's own foot point,
     // p - f_c grad f_c (exact SDFs), which finds the part of the surface near that child's
     // nearest point, Newton's method where the rounds fail (a rim rounded tightly by the
@@ -2594,7 +2643,8 @@ bool Blend::mayKinkWithin(const Vec3d& p, double radius) const
     for (const auto& child : mChildren) {
         if (child->mayKinkWithin(p, radius)) return true;
         pieces.clear();
-        if (!child->isExactSdf() || !pieceParts(*child, pieces)) continue;
+        double round = 0.0;
+        if (!child->isExactSdf() || !kinkPieces(*child, pieces, round)) continue;
         if (piecesKinkWithin(pieces, p, child->value(p), radius)) return true;
     }
     return false;
