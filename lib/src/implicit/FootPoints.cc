@@ -618,6 +618,9 @@ struct Edge
     std::size_t a = 0, b = 0;   // the pieces (a rim: the side, then the cap)
     std::size_t c = 0;          // a box's corner: its third piece
     bool rim = false, corner = false;
+    /// A box's edge: the pieces across it (at right angles to both of its own), at most 0 in
+    /// its region; how many.
+    std::size_t across[2] = {0, 0}, nAcross = 0;
     double round = 0.0;         // a rounded box's: its faces' planes less this meet on the edge
     Vec3d origin, axis;         // rim: the axis, s measured along it from origin
     double s0 = 0.0, r0 = 0.0;  // rim: the circle's place on the axis and its radius
@@ -663,14 +666,21 @@ struct Edge
         return (du * u + dv * v + dw * w) / len;
     }
     /// How far @a p is from the edge's region: where two faces of a box at right angles are
-    /// both >= 0; for a rim, the wedge of the two outward normals at the circle, in the
+    /// both >= 0 (a rounded box's: -round) and those across at most that (a corner's: its
+    /// three); for a rim, the wedge of the two outward normals at the circle, in the
     /// half-plane through the axis (the region is a solid of revolution).
     double regionDistance(const std::vector<Piece>& pieces, const Vec3d& p) const
     {
         if (!rim) {
-            return std::hypot(std::max(-pieces[a].value(p) - round, 0.0),
-                              std::max(-pieces[b].value(p) - round, 0.0),
-                              corner ? std::max(-pieces[c].value(p) - round, 0.0) : 0.0);
+            // At most one of the pieces across is above 0 (they are parallel).
+            double over = 0.0;
+            for (std::size_t k = 0; k < nAcross; ++k) {
+                over = std::max(over, pieces[across[k]].value(p) + round);
+            }
+            return std::hypot(std::hypot(std::max(-pieces[a].value(p) - round, 0.0),
+                                         std::max(-pieces[b].value(p) - round, 0.0)),
+                              std::hypot(corner ? std::max(-pieces[c].value(p) - round, 0.0) : 0.0,
+                                         over));
         }
         double s, r;
         Vec3d radial;
@@ -743,12 +753,17 @@ bool solidEdges(const std::vector<Piece>& pieces, double round, std::vector<Edge
         }
     }
     const std::size_t pairs = edges.size();
+    for (Edge& e : edges) {
+        for (std::size_t l = 0; l < np && e.nAcross < 2; ++l) {
+            if (perpendicular[e.a * np + l] && perpendicular[e.b * np + l]) e.across[e.nAcross++] = l;
+        }
+    }
     for (std::size_t k = 0; k < pairs; ++k) {
         const Edge e = edges[k];
         for (std::size_t l = e.b + 1; l < np; ++l) {
             if (perpendicular[e.a * np + l] && perpendicular[e.b * np + l]) {
                 Edge v = e;
-                v.c = l, v.corner = true;
+                v.c = l, v.corner = true, v.nAcross = 0;
                 edges.push_back(v);
             }
         }
@@ -1118,7 +1133,18 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
             split = std::min(split, region);
         }
         if (s < 0.0 && f < 0.0) split = std::max(own, 0.0); // F < 0 on the faces' regions
-        const double faces = s < 0.0 && f > 0.0 ? sheets : std::max(sheets, split);
+        double faces = s < 0.0 && f > 0.0 ? sheets : std::max(sheets, split);
+        if (square[c]) {
+            // R0 itself: where at most one of the pieces (moved in by a rounded box's radius)
+            // is above 0, as far as the hypot of p's excesses but the largest (at right angles).
+            double sum = 0.0, top = 0.0;
+            for (std::size_t j = 0; j < ps.size(); ++j) {
+                const double over = std::max(phi[j] + rounds[c], 0.0);
+                sum += over * over;
+                top = std::max(top, over);
+            }
+            faces = std::max(faces, std::sqrt(std::max(sum - top * top, 0.0)));
+        }
         const double below = std::min({faces, regions[i], radius[i]});
         if (!std::isfinite(best[i]) && below >= query.far) {
             // Farther than far from the surface: all that is asked there.
