@@ -10,6 +10,12 @@ probability 0.3; voxel size 0.02. The same seed writes the same scenes.
 
 Usage: scripts/random_blends.py SEED COUNT DIR   (writes DIR/s{SEED}_{i}.json)
 Timing, against another binary: ivdb bench-run DIR/s5_0.json --method sparse --voxel-size 0.02
+
+With a fourth argument, `boxes` or `rounded`: blends of a box (a rounded box) or a capped
+cylinder with a sphere, capsule, box, capped cylinder or torus, either moved with probability
+0.5, in either order; union (3 in 5), intersection or difference; voxel 0.01 (writes
+DIR/b{SEED}_{i}.json or DIR/r{SEED}_{i}.json): the scenes the blend sheets were checked on
+(docs/method.md#offsets-shells-blends-and-grid-shapes).
 """
 import json
 import os
@@ -17,7 +23,63 @@ import random
 import sys
 
 
+def capped(seed, count, out, rounded):
+    """The `boxes` and `rounded` scenes."""
+    rng = random.Random(seed)
+
+    def v(s=0.4):
+        return [round(rng.uniform(-s, s), 3) for _ in range(3)]
+
+    def first():
+        if rng.random() < (0.7 if rounded else 0.6):
+            if not rounded:
+                return {"type": "box", "center": v(0.1), "size": [round(rng.uniform(0.3, 0.8), 3) for _ in range(3)]}
+            size = [round(rng.uniform(0.3, 0.8), 3) for _ in range(3)]
+            return {"type": "rounded_box", "center": v(0.1), "size": size,
+                    "radius": round(rng.uniform(0.01, min(size) / 2 - 0.01), 3)}
+        return {"type": "capped_cylinder", "a": v(), "b": v(), "radius": round(rng.uniform(0.12, 0.35), 3)}
+
+    def other():
+        t = rng.choice(["sphere", "capsule", "box", "capped_cylinder", "torus"])
+        if t == "sphere":
+            return {"type": t, "center": v(), "radius": round(rng.uniform(0.1, 0.4), 3)}
+        if t == "capsule":
+            return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.1, 0.3), 3)}
+        if t == "torus":
+            major = rng.uniform(0.2, 0.45)
+            return {"type": t, "center": v(0.2), "major_radius": round(major, 3),
+                    "minor_radius": round(rng.uniform(0.06, 0.8 * major), 3)}
+        if t == "box":
+            return {"type": t, "center": v(0.3), "size": [round(rng.uniform(0.2, 0.6), 3) for _ in range(3)]}
+        return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.12, 0.35), 3)}
+
+    def moved(shape):
+        if rng.random() < 0.5:
+            return shape
+        t = {"type": "transform", "child": shape,
+             "rotate_deg": [round(rng.uniform(-60, 60), 1) for _ in range(3)], "translate": v(0.1)}
+        if rng.random() < 0.3:
+            t["scale"] = round(rng.uniform(0.7, 1.3), 3)
+        return t
+
+    os.makedirs(out, exist_ok=True)
+    for i in range(count):
+        children = [moved(first()), moved(other())]
+        if rng.random() < 0.3:
+            children.reverse()
+        op = rng.choice(["union", "union", "union", "intersection", "difference"])
+        if rng.random() < 0.5:
+            node = {"type": "smooth", "op": op, "k": round(rng.uniform(0.03, 0.2), 3), "children": children}
+        else:
+            node = {"type": "blend", "op": op, "p": round(rng.uniform(10, 80), 1), "children": children}
+        name = ("r" if rounded else "b") + f"{seed}_{i}.json"
+        with open(os.path.join(out, name), "w") as f:
+            json.dump({"voxel_size": 0.01, "shape": node}, f)
+
+
 def main():
+    if len(sys.argv) == 5 and sys.argv[4] in ("boxes", "rounded"):
+        return capped(int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4] == "rounded")
     if len(sys.argv) != 4:
         sys.exit(__doc__)
     seed, count, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]

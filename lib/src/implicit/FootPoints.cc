@@ -755,7 +755,9 @@ bool solidEdges(const std::vector<Piece>& pieces, double round, std::vector<Edge
     const std::size_t pairs = edges.size();
     for (Edge& e : edges) {
         for (std::size_t l = 0; l < np && e.nAcross < 2; ++l) {
-            if (perpendicular[e.a * np + l] && perpendicular[e.b * np + l]) e.across[e.nAcross++] = l;
+            if (perpendicular[e.a * np + l] && perpendicular[e.b * np + l]) {
+                e.across[e.nAcross++] = l;
+            }
         }
     }
     for (std::size_t k = 0; k < pairs; ++k) {
