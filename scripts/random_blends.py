@@ -23,35 +23,51 @@ import random
 import sys
 
 
+def point(rng, s=0.4):
+    """A point with coordinates in [-s, s]."""
+    return [round(rng.uniform(-s, s), 3) for _ in range(3)]
+
+
+def sizes(rng, lo, hi):
+    """Three edge lengths in [lo, hi]."""
+    return [round(rng.uniform(lo, hi), 3) for _ in range(3)]
+
+
+def common_primitive(rng, t):
+    """A capped cylinder, capsule, torus or sphere (type t, else a sphere): both kinds of
+    scene draw these alike, in the same order of random numbers."""
+    if t == "capped_cylinder":
+        return {"type": t, "a": point(rng), "b": point(rng), "radius": round(rng.uniform(0.12, 0.35), 3)}
+    if t == "capsule":
+        return {"type": t, "a": point(rng), "b": point(rng), "radius": round(rng.uniform(0.1, 0.3), 3)}
+    if t == "torus":
+        major = rng.uniform(0.2, 0.45)
+        return {"type": t, "center": point(rng, 0.2), "major_radius": round(major, 3),
+                "minor_radius": round(rng.uniform(0.06, 0.8 * major), 3)}
+    return {"type": "sphere", "center": point(rng), "radius": round(rng.uniform(0.1, 0.4), 3)}
+
+
 def capped(seed, count, out, rounded):
     """The `boxes` and `rounded` scenes."""
     rng = random.Random(seed)
 
     def v(s=0.4):
-        return [round(rng.uniform(-s, s), 3) for _ in range(3)]
+        return point(rng, s)
 
     def first():
         if rng.random() < (0.7 if rounded else 0.6):
             if not rounded:
-                return {"type": "box", "center": v(0.1), "size": [round(rng.uniform(0.3, 0.8), 3) for _ in range(3)]}
-            size = [round(rng.uniform(0.3, 0.8), 3) for _ in range(3)]
+                return {"type": "box", "center": v(0.1), "size": sizes(rng, 0.3, 0.8)}
+            size = sizes(rng, 0.3, 0.8)
             return {"type": "rounded_box", "center": v(0.1), "size": size,
                     "radius": round(rng.uniform(0.01, min(size) / 2 - 0.01), 3)}
-        return {"type": "capped_cylinder", "a": v(), "b": v(), "radius": round(rng.uniform(0.12, 0.35), 3)}
+        return common_primitive(rng, "capped_cylinder")
 
     def other():
         t = rng.choice(["sphere", "capsule", "box", "capped_cylinder", "torus"])
-        if t == "sphere":
-            return {"type": t, "center": v(), "radius": round(rng.uniform(0.1, 0.4), 3)}
-        if t == "capsule":
-            return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.1, 0.3), 3)}
-        if t == "torus":
-            major = rng.uniform(0.2, 0.45)
-            return {"type": t, "center": v(0.2), "major_radius": round(major, 3),
-                    "minor_radius": round(rng.uniform(0.06, 0.8 * major), 3)}
         if t == "box":
-            return {"type": t, "center": v(0.3), "size": [round(rng.uniform(0.2, 0.6), 3) for _ in range(3)]}
-        return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.12, 0.35), 3)}
+            return {"type": t, "center": v(0.3), "size": sizes(rng, 0.2, 0.6)}
+        return common_primitive(rng, t)
 
     def moved(shape):
         if rng.random() < 0.5:
@@ -86,24 +102,16 @@ def main():
     rng = random.Random(seed)
 
     def v(s=0.4):
-        return [round(rng.uniform(-s, s), 3) for _ in range(3)]
+        return point(rng, s)
 
     def primitive():
         t = rng.choice(["capped_cylinder", "capped_cone", "capped_cone", "capsule", "torus", "sphere", "box"])
-        if t == "capped_cylinder":
-            return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.12, 0.35), 3)}
         if t == "capped_cone":
             return {"type": t, "a": v(), "b": v(), "radius_a": round(rng.uniform(0.1, 0.45), 3),
                     "radius_b": round(rng.uniform(0.05, 0.4), 3)}
-        if t == "capsule":
-            return {"type": t, "a": v(), "b": v(), "radius": round(rng.uniform(0.1, 0.3), 3)}
-        if t == "torus":
-            major = rng.uniform(0.2, 0.45)
-            return {"type": t, "center": v(0.2), "major_radius": round(major, 3),
-                    "minor_radius": round(rng.uniform(0.06, 0.8 * major), 3)}
-        if t == "sphere":
-            return {"type": t, "center": v(), "radius": round(rng.uniform(0.1, 0.4), 3)}
-        return {"type": t, "center": v(0.2), "size": [round(rng.uniform(0.2, 0.7), 3) for _ in range(3)]}
+        if t == "box":
+            return {"type": t, "center": v(0.2), "size": sizes(rng, 0.2, 0.7)}
+        return common_primitive(rng, t)
 
     def moved(shape):
         r = rng.random()

@@ -686,10 +686,10 @@ struct Edge
         Vec3d radial;
         meridian(p, s, r, radial);
         const double ws = s - s0, wr = r - r0;
-        // Inside the wedge: a combination of the two normals with weights >= 0.
-        const double det = capS * sideR; // the normals (capS, 0) and (sideS, sideR)
+        // Inside the wedge: a combination of the two normals, (capS, 0) and (sideS, sideR) with
+        // capS = +-1 and sideR > 0, with weights >= 0.
         const double kSide = wr / sideR, kCap = (ws - kSide * sideS) / capS;
-        if (det != 0.0 && kSide >= 0.0 && kCap >= 0.0) return 0.0;
+        if (kSide >= 0.0 && kCap >= 0.0) return 0.0;
         // Else the nearest of its two boundary rays.
         auto toRay = [&](double ns, double nr) {
             const double t = std::max(ws * ns + wr * nr, 0.0);
