@@ -15,7 +15,10 @@ With a fourth argument, `boxes` or `rounded`: blends of a box (a rounded box) or
 cylinder with a sphere, capsule, box, capped cylinder or torus, either moved with probability
 0.5, in either order; union (3 in 5), intersection or difference; voxel 0.01 (writes
 DIR/b{SEED}_{i}.json or DIR/r{SEED}_{i}.json): the scenes the blend sheets were checked on
-(docs/method.md#offsets-shells-blends-and-grid-shapes).
+(docs/method.md#offsets-shells-blends-and-grid-shapes). With `offsets`: the plain scenes with
+each blend shrunk (`offset`, distance -0.01 to -0.06; 3 in 4) or shelled (`shell`, thickness
+0.04 to 0.12) before it is moved (writes DIR/o{SEED}_{i}.json): the scenes its kink rule was
+checked on there.
 """
 import json
 import os
@@ -96,9 +99,15 @@ def capped(seed, count, out, rounded):
 def main():
     if len(sys.argv) == 5 and sys.argv[4] in ("boxes", "rounded"):
         return capped(int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4] == "rounded")
+    if len(sys.argv) == 5 and sys.argv[4] == "offsets":
+        return blends(int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], True)
     if len(sys.argv) != 4:
         sys.exit(__doc__)
-    seed, count, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+    return blends(int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], False)
+
+
+def blends(seed, count, out, offsets):
+    """The plain scenes, or with @a offsets each blend shrunk or shelled."""
     rng = random.Random(seed)
 
     def v(s=0.4):
@@ -131,9 +140,15 @@ def main():
             node = {"type": "smooth", "op": op, "k": round(rng.uniform(0.04, 0.2), 3), "children": children}
         else:
             node = {"type": "blend", "op": op, "p": round(rng.uniform(10, 60), 1), "children": children}
+        if offsets:
+            if rng.random() < 0.75:
+                node = {"type": "offset", "child": node, "distance": round(-rng.uniform(0.01, 0.06), 3)}
+            else:
+                node = {"type": "shell", "child": node, "thickness": round(rng.uniform(0.04, 0.12), 3)}
         if rng.random() < 0.3:
             node = moved(node)
-        with open(os.path.join(out, f"s{seed}_{i}.json"), "w") as f:
+        name = ("o" if offsets else "s") + f"{seed}_{i}.json"
+        with open(os.path.join(out, name), "w") as f:
             json.dump({"voxel_size": 0.02, "shape": node}, f)
 
 

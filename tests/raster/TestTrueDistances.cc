@@ -1929,12 +1929,15 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheir
     // each distance Blend::footPoints certifies is no farther than a brute-force search
     // (bisection on the radius of spheres of 4,000 directions around the voxel that first reach
     // the other sign: a surface point that far) by more than 0.002 voxel (twice the tolerance;
-    // measured 0.0000 at most), and at least 95%, 95%, 93%, 92% and 15% are certified: measured
-    // 98%, 98%, 96%, 95% and 22%, against 77%, 52%, 79% and 76% without the sheets (the lead
-    // rule's). The rasterizer's lattice searches: 590, 977, 4,982, 1,603 and 1,532 of the band's
-    // voxels, against 2,732, 4,583, 7,870 and 2,199 without the sheets. The rounded box's kinks
-    // were not checked before: 10 of 300 voxels sampled were certified up to 0.15 voxel farther
-    // than the surface.
+    // measured 0.0000 at most), and at least 95%, 95%, 93%, 92%, 25%, 93%, 90% and 50% are
+    // certified: measured 98%, 98%, 96%, 95%, 33%, 96%, 94% and 56%, against 77%, 52%, 79% and
+    // 76% for the first four without the sheets (the lead rule's). The rasterizer's lattice
+    // searches: 590, 977, 4,982, 1,603, 1,432, 743, 2,143 and 11,555 of the band's voxels,
+    // against 2,732, 4,583, 7,870 and 2,199 for the first four without the sheets. The rounded
+    // box's kinks were not checked before: 10 of 300 voxels sampled were certified up to 0.15
+    // voxel farther than the surface. Nor were the offsets' and shells' (the last three): random
+    // offsets and shells of such blends had voxels up to 0.9 voxel too far (the smooth
+    // iteration's local answers, certified).
     const double dx = 0.02, tolerance = 1e-3 * dx, far = 3.0 * dx;
     using implicit::Implicit;
     const auto box = std::make_shared<implicit::Box>(Vec3d(0.0), Vec3d(1.2, 0.8, 0.8));
@@ -1945,6 +1948,9 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheir
     const auto smallBall = std::make_shared<implicit::Sphere>(Vec3d(-0.146, -0.181, -0.024), 0.371);
     const auto rounded = std::make_shared<implicit::RoundedBox>(Vec3d(0.195, 0.184, 0.051),
                                                                 Vec3d(0.45, 0.369, 0.245), 0.03);
+    const auto torus = std::make_shared<implicit::Torus>(Vec3d(0.12, 0.059, -0.135), 0.438, 0.233);
+    const auto wideCone = std::make_shared<implicit::CappedCone>(Vec3d(-0.283, -0.199, -0.25),
+                                                                 Vec3d(-0.279, -0.07, 0.104), 0.443, 0.215);
     struct Case
     {
         std::string name;
@@ -1970,7 +1976,28 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheir
         {"smooth intersection of a sphere and a rounded box",
          std::make_shared<implicit::Blend>(implicit::CsgOp::Intersection, implicit::BlendKernel::polynomial(0.167),
                                            std::vector<Implicit::Ptr>{smallBall, rounded}),
-         0.15, 1700},
+         0.25, 1600},
+        // An offset or a shell of a blend is the blend of its children's offsets, whose values
+        // kink where the children's do (a shrunk box's pieces moved in, a cone's out).
+        {"shrunk smooth union of a box and a sphere",
+         std::make_shared<implicit::Offset>(
+             std::make_shared<implicit::Blend>(implicit::CsgOp::Union, implicit::BlendKernel::polynomial(0.15),
+                                               std::vector<Implicit::Ptr>{box, ball}),
+             -0.04),
+         0.93, 850},
+        {"shell of a blend of a cone and a sphere",
+         std::make_shared<implicit::Shell>(
+             std::make_shared<implicit::Blend>(implicit::CsgOp::Union, 30.0, std::vector<Implicit::Ptr>{cone, ball}),
+             0.06),
+         0.90, 2400},
+        // (A torus grown is not convex: the blend's lead rule has no margin for it, and its
+        // points take the smooth iteration, checked near the cone's kinks the same way.)
+        {"shell of a smooth difference of a torus and a cone",
+         std::make_shared<implicit::Shell>(
+             std::make_shared<implicit::Blend>(implicit::CsgOp::Difference, implicit::BlendKernel::polynomial(0.075),
+                                               std::vector<Implicit::Ptr>{torus, wideCone}),
+             0.116),
+         0.50, 12500},
     };
     const std::vector<Vec3d> dirs = sphereDirections(4000);
 #ifdef IVDB_SANITIZED
@@ -2024,7 +2051,7 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheir
             }
         }
         const double fraction = double(certified) / double(std::max<std::size_t>(points.size(), 1));
-        EXPECT_GE(points.size(), 500u / every) << c.name;
+        EXPECT_GE(points.size(), 300u / every) << c.name;
         EXPECT_GE(fraction, c.certified) << c.name;
         std::printf("%s: %zu voxels near a kink, %.0f%% certified, %d checked, at most %.2g voxel "
                     "farther than the search; %llu lattice searches\n", c.name.c_str(), points.size(),

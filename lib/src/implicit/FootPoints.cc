@@ -448,6 +448,13 @@ struct Piece
         if (!(len > 0.0)) return Vec3d(0.0); // on the axis: no normal
         return (radial / len - n * slope) * cosine;
     }
+    /// Moved out by @a d: the value less d (a plane moved along its normal, a side's radius
+    /// grown by d over the cosine of its slope).
+    void shift(double d)
+    {
+        if (kind == Kind::Plane) offset += d;
+        else if (kind == Kind::Side) r += d / cosine;
+    }
     /// Moved by @a t (a rigid motion with a uniform scale).
     void move(const Transform& t, double s)
     {
@@ -565,14 +572,18 @@ bool pieceParts(const Implicit& f, std::vector<Piece>& out)
 }
 
 /// The pieces whose values tell where @a f's distance may kink (piecesKinkWithin()):
-/// pieceParts(), and of a rounded box (moved rigidly or scaled uniformly) its outer box's faces,
-/// with @a round its radius (else 0): inside the box it rounds, its distance is the largest of
-/// those, so it kinks where they tie; the rounded part is smooth (solidEdges()). False for
-/// none.
+/// pieceParts() of an exact SDF (a box, a capped cylinder or cone), and of a rounded box its
+/// outer box's faces, with @a round its radius: a rounded box is its inner box's distance less
+/// r, and its outer faces are the inner ones moved out by r, so inside the inner box (where
+/// its distance kinks: the faces tie) its value is the largest of them. An offset of any of
+/// those by d (moved rigidly or scaled uniformly) likewise: its value is the child's less d,
+/// its pieces the child's moved out by d, @a round the child's plus d (negative for a shrunk
+/// one). So the value plus @a round is the unshifted solid's own distance, which kinks only
+/// inside it. False for none (and for every other shape, a CSG node's included).
 bool kinkPieces(const Implicit& f, std::vector<Piece>& out, double& round)
 {
     round = 0.0;
-    if (pieceParts(f, out)) return true;
+    if (f.isExactSdf() && pieceParts(f, out)) return true;
     if (const auto* rounded = dynamic_cast<const RoundedBox*>(&f)) {
         boxPlanes(rounded->center(), rounded->size() * 0.5, out);
         round = rounded->radius();
@@ -586,15 +597,22 @@ bool kinkPieces(const Implicit& f, std::vector<Piece>& out, double& round)
         round *= s;
         return true;
     }
+    if (const auto* o = dynamic_cast<const Offset*>(&f)) {
+        if (!kinkPieces(*o->child(), out, round)) return false;
+        for (std::size_t k = before; k < out.size(); ++k) out[k].shift(o->distance());
+        round += o->distance();
+        return true;
+    }
     return false;
 }
 
-/// Of the exact SDF made of @a pieces (pieceParts() of a box or a capped cone), whose value at
-/// @a p is @a own: the largest of its pieces' values at @a p, and whether it may kink within
-/// @a radius of @a p. Outside a convex solid its distance is smooth (C1); inside, it is the
-/// largest of its pieces' values, each 1-Lipschitz, so the same piece stays the largest within
-/// the ball unless the two largest differ by 2 radius or less: the ball reaches inside
-/// (own < radius) and the two largest are that close.
+/// Of a shape made of @a pieces (kinkPieces()), where the distance of the solid they shift
+/// (its value plus kinkPieces()' round) is @a own at @a p: the largest of the pieces' values at
+/// @a p, and whether the shape's value may kink within @a radius of @a p. Outside a convex
+/// solid its distance is smooth (C1); inside, it is the largest of its pieces' values, each
+/// 1-Lipschitz, so the same piece stays the largest within the ball unless the two largest
+/// differ by 2 radius or less: the ball reaches inside (own < radius) and the two largest are
+/// that close. A shift moves every piece's value alike.
 bool piecesKinkWithin(const std::vector<Piece>& pieces, const Vec3d& p, double own,
                       double radius, double* largest = nullptr)
 {
@@ -621,7 +639,10 @@ struct Edge
     /// A box's edge: the pieces across it (at right angles to both of its own), at most 0 in
     /// its region; how many.
     std::size_t across[2] = {0, 0}, nAcross = 0;
-    double round = 0.0;         // a rounded box's: its faces' planes less this meet on the edge
+    /// kinkPieces()' shift (a rounded box's radius, an offset's distance): the pieces less it
+    /// (the rim's circle, s0 and r0, already without it) meet on the edge, whose distance is
+    /// less it too.
+    double round = 0.0;
     Vec3d origin, axis;         // rim: the axis, s measured along it from origin
     double s0 = 0.0, r0 = 0.0;  // rim: the circle's place on the axis and its radius
     double capS = 1.0;          // rim: the cap's outward normal, (capS, 0) in (s, rho)
@@ -646,7 +667,7 @@ struct Edge
         double s, r;
         Vec3d radial;
         meridian(p, s, r, radial);
-        return std::hypot(s - s0, r - r0);
+        return std::hypot(s - s0, r - r0) - round;
     }
     Vec3d gradient(const std::vector<Piece>& pieces, const Vec3d& p) const
     {
@@ -725,12 +746,13 @@ bool solidEdges(const std::vector<Piece>& pieces, double round, std::vector<Edge
             const double along = dot(cap.n, side.n); // +-1: a cap is across the axis
             if (std::abs(std::abs(along) - 1.0) > 1e-9) return false;
             Edge e;
-            e.a = 0, e.b = c, e.rim = true;
+            e.a = 0, e.b = c, e.rim = true, e.round = round;
             e.origin = side.a, e.axis = side.n;
-            // The cap's plane n . q = offset: along the axis at s0 from origin.
+            // The cap's plane n . q = offset (moved back by the shift, as the side's radius):
+            // along the axis at s0 from origin.
             e.capS = along > 0.0 ? 1.0 : -1.0;
-            e.s0 = e.capS * cap.offset - dot(side.n, side.a);
-            e.r0 = side.r + side.slope * e.s0;
+            e.s0 = e.capS * (cap.offset - round) - dot(side.n, side.a);
+            e.r0 = side.r - round / side.cosine + side.slope * e.s0;
             e.sideS = -side.slope * side.cosine, e.sideR = side.cosine;
             if (!(e.r0 >= 0.0)) return false;
             edges.push_back(e);
@@ -862,11 +884,13 @@ double dipBelow(const BlendKernel& kernel, double gap)
 
 /// Certified distances near a kink of one child's distance, from the sheets the blend's surface
 /// is made of there (@a kinked points of @a blend, the children's @a pieces as
-/// Blend::nearerFeet() found them, with a rounded box's radius in @a rounds; @a done set where
-/// certified).
+/// Blend::nearerFeet() found them, with kinkPieces()' shifts in @a rounds: a rounded box's
+/// radius, an offset's distance; @a done set where certified).
 ///
-/// Child C, a box or a capped cone, is the largest of its pieces' values phi_j (each the exact
-/// distance to its plane or cone side) inside it and wherever at most one of them is positive
+/// Child C, a box or a capped cone (or a rounded box, or an offset of one: the same read with
+/// its pieces shifted and "positive" as "above -round", kinkPieces()), is the largest of its
+/// pieces' values phi_j (each the exact distance to its plane or cone side) inside it and
+/// wherever at most one of them is positive
 /// (region R0: C itself, and face j's region where only phi_j is), and at least that largest
 /// everywhere; where only the two of an edge e are positive (R_e, of pieces meeting at right
 /// angles: rightAngles()) it is their hypot, the distance l_e to the edge. Within the ball B of
@@ -875,8 +899,8 @@ double dipBelow(const BlendKernel& kernel, double gap)
 /// intersection) and no other child kinking in B, the blend in union form
 /// F = U(.., s C, ..) is, in B, the largest (s = 1) or the least (s = -1) of the face sheets
 /// G_j = U(.., s phi_j, ..) on R0, G_j on face j's region, and the edge sheet
-/// G_e = U(.., s l_e, ..) on R_e; each a smooth blend of exact SDFs whose distance d_j the
-/// blend's own rules certify. Every point y of B on the surface (F(y) = 0) lies
+/// G_e = U(.., s l_e, ..) on R_e; each a smooth blend of exact SDFs (or of their offsets)
+/// whose distance d_j the blend's own rules certify. Every point y of B on the surface (F(y) = 0) lies
 /// - in R0, farther than the least d_j where F(p) s < 0 (p inside the sheets' intersection,
 ///   or outside their union: on F's side of every sheet), else farther than the largest d_j of
 ///   the sheets p is on F's side of (a crease where sheets meet), and:
@@ -937,14 +961,16 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
             double big = 0.0;
             if (several) break;
             if (pieces[c].empty() ||
-                !piecesKinkWithin(pieces[c], p, sign(c) * terms[c * n + i], r, &big)) {
+                !piecesKinkWithin(pieces[c], p, sign(c) * terms[c * n + i] + rounds[c], r,
+                                  &big)) {
                 continue;
             }
             several = found != nc;
             found = c;
             largest[i] = big;
         }
-        if (several || found == nc || !detail::convexSdf(*children[found])) continue;
+        // (Pieces are kinkPieces()' only of a convex solid, shifted or not.)
+        if (several || found == nc) continue;
         // No edge region in B (a rounded box's reach inside it by its radius).
         inside[i] = sign(found) * terms[found * n + i] + r + rounds[found] <= 0.0;
         if (!inside[i] && !known[found]) continue;
@@ -1070,7 +1096,13 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
                 double sp, rp;
                 Vec3d radial;
                 e.meridian(p, sp, rp, radial);
-                if (rp > 0.0) offer(i, e.origin + e.axis * e.s0 + radial * e.r0);
+                if (!(rp > 0.0)) continue;
+                // On the circle, then out by an offset's shift.
+                const Vec3d q = e.origin + e.axis * e.s0 + radial * e.r0;
+                const double len = (p - q).length();
+                if (e.round == 0.0 || len > 0.0) {
+                    offer(i, q + (p - q) * (e.round / std::max(len, 1e-300)));
+                }
             }
         }
     }
@@ -2371,6 +2403,19 @@ bool Blend::leadRuleApplies() const
 
 namespace {
 
+/// True if one of @a children is a shape whose value kinks inside (kinkPieces()), and at most
+/// 64 (nearerFeet() tries each child's foot point).
+bool anyChildKinks(const std::vector<Implicit::Ptr>& children)
+{
+    if (children.size() > 64) return false;
+    std::vector<Piece> pieces;
+    double round = 0.0;
+    for (const auto& child : children) {
+        if (kinkPieces(*child, pieces, round)) return true;
+    }
+    return false;
+}
+
 /// The least term rho t_c of a blend's @a nc rows of @a n terms at point @a i (@a first, of
 /// child @a decider) and the next (@a second): the lead rule's two terms.
 void leadingTerms(const double* terms, std::size_t nc, std::size_t n, std::size_t i, double rho,
@@ -2398,9 +2443,15 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
     // side of the child where its term is positive, and a value that small puts the child's
     // surface within its distanceFactor() of that side times it; so the reach is taken at the
     // tolerance over the largest factor (mChildLeadFactor, docs/method.md#true-distances).
-    // Elsewhere, the smooth iteration on the blended field. A non-uniformly scaled capped
-    // cylinder in a blend: its rims (edges, where the iteration cannot converge) far from the
-    // other child get the scaled shape's own foot points.
+    // Elsewhere, the smooth iteration on the blended field, checked near a child's kinks as
+    // in footPoints() (nearerFeet(): an offset of a box or a capped cone kinks where the shape
+    // does, and an offset or a shell of a blend is a blend of its children's offsets), but
+    // with the children's foot points alone for extra starts, and no Newton's method: on a
+    // shell of a blend of a cone and a box those took 60% of the compute, and on 120 random
+    // shrunk or shelled blends they moved the worst voxels little either way
+    // (docs/performance.md#true-distances). A
+    // non-uniformly scaled capped cylinder in a blend: its rims (edges, where the iteration
+    // cannot converge) far from the other child get the scaled shape's own foot points.
     const std::size_t nc = mChildren.size();
     const double lead = mKernel.reach(query.tolerance / mChildLeadFactor) + mKernel.swell(nc);
     const double rho = mOp == Op::Union ? 1.0 : -1.0;
@@ -2412,7 +2463,7 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
     childRows(x, y, z, n, terms, nullptr);
     std::size_t decider[kMaxBatch];
     double second[kMaxBatch];
-    bool candidate[kMaxBatch];
+    bool candidate[kMaxBatch], led[kMaxBatch] = {};
     for (std::size_t i = 0; i < n; ++i) {
         double first;
         leadingTerms(terms, nc, n, i, rho, first, second[i], decider[i]);
@@ -2444,9 +2495,11 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
             out.distance[i] = d;
             out.ok[i] = true;
             out.x[i] = feet.x[k], out.y[i] = feet.y[k], out.z[i] = feet.z[k];
+            led[i] = true;
         }
     }
     detail::iterateUncertified(*this, x, y, z, values, n, query, out);
+    if (anyChildKinks(mChildren)) nearerFeet(x, y, z, values, n, query, terms, led, out, false);
 }
 
 void Blend::footPoints(const double* x, const double* y, const double* z, const double* values,
@@ -2456,7 +2509,14 @@ void Blend::footPoints(const double* x, const double* y, const double* z, const 
         if (std::isfinite(mChildLeadFactor)) {
             return childLeadFootPoints(x, y, z, values, n, query, out);
         }
-        return Implicit::footPoints(x, y, z, values, n, query, out);
+        // The smooth iteration, checked near a child's kinks (nearerFeet(), as in
+        // childLeadFootPoints()).
+        Implicit::footPoints(x, y, z, values, n, query, out);
+        if (!anyChildKinks(mChildren)) return;
+        const detail::BatchRows rows(mChildren.size() * n);
+        childRows(x, y, z, n, rows.get(), nullptr);
+        const bool led[kMaxBatch] = {};
+        return nearerFeet(x, y, z, values, n, query, rows.get(), led, out, false);
     }
     // With foot points asked for, the children's values and gradients once, for the lead rule
     // (the deciding child's gradient) and for the smooth iteration's start (the blend's
@@ -2549,7 +2609,7 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
 
 void Blend::nearerFeet(const double* x, const double* y, const double* z, const double* values,
                        std::size_t n, const FootQuery& query, const double* terms,
-                       const bool* led, FootPoints& out) const
+                       const bool* led, FootPoints& out, bool allStarts) const
 {
     const std::size_t nc = mChildren.size();
     auto own = [&](std::size_t c, std::size_t i) { // child c's own value at point i
@@ -2571,7 +2631,7 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
         for (std::size_t i = 0; i < n; ++i) {
             if (led[i] || std::abs(values[i]) >= query.far) continue;
             const double reach = out.ok[i] ? std::abs(out.distance[i]) : query.far;
-            if (!piecesKinkWithin(pieces[c], Vec3d(x[i], y[i], z[i]), own(c, i),
+            if (!piecesKinkWithin(pieces[c], Vec3d(x[i], y[i], z[i]), own(c, i) + rounds[c],
                                   reach + query.tolerance)) {
                 continue;
             }
@@ -2609,7 +2669,7 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     auto offer = [&](std::size_t i, const Vec3d& p, const Vec3d& start) {
         Vec3d q;
         if (!smoothRefine(*this, p, start, query.tolerance, q) &&
-            !newtonFootPoint(*this, p, start, query.tolerance, q)) {
+            !(allStarts && newtonFootPoint(*this, p, start, query.tolerance, q))) {
             return;
         }
         const double d = (q - p).length();
@@ -2646,7 +2706,7 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
         for (std::size_t c = 0; c < nc; ++c) {
             if (only == nc || c == only) offer(i, p, p - mChildren[c]->gradient(p) * own(c, i));
         }
-        if (!kinked[i]) continue;
+        if (!kinked[i] || !allStarts) continue;
         // Near a kink, from the foot of the perpendicular on each face within reach of the
         // largest (its plane's or its side's): the iteration stays on the sheet of the surface
         // that face makes, where the child's own foot point can lie on another.
@@ -2654,7 +2714,8 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
             const double reach =
                 (out.surface[i] ? std::abs(out.distance[i]) : query.far) + query.tolerance;
             double largest = 0.0;
-            if (pieces[c].empty() || !piecesKinkWithin(pieces[c], p, own(c, i), reach, &largest)) {
+            if (pieces[c].empty() ||
+                !piecesKinkWithin(pieces[c], p, own(c, i) + rounds[c], reach, &largest)) {
                 continue;
             }
             for (const Piece& piece : pieces[c]) {
@@ -2672,8 +2733,8 @@ bool Blend::mayKinkWithin(const Vec3d& p, double radius) const
         if (child->mayKinkWithin(p, radius)) return true;
         pieces.clear();
         double round = 0.0;
-        if (!child->isExactSdf() || !kinkPieces(*child, pieces, round)) continue;
-        if (piecesKinkWithin(pieces, p, child->value(p), radius)) return true;
+        if (!kinkPieces(*child, pieces, round)) continue;
+        if (piecesKinkWithin(pieces, p, child->value(p) + round, radius)) return true;
     }
     return false;
 }
