@@ -882,6 +882,9 @@ double dipBelow(const BlendKernel& kernel, double gap)
     return 0.25 * kernel.k * h * h;
 }
 
+bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double tol,
+                 Vec3d& out, double& floor);
+
 /// Certified distances near a kink of one child's distance, from the sheets the blend's surface
 /// is made of there (@a kinked points of @a blend, the children's @a pieces as
 /// Blend::nearerFeet() found them, with kinkPieces()' shifts in @a rounds: a rounded box's
@@ -1013,6 +1016,7 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
     // The sheet of child c with @a field in its place, at the points @a wanted says (with the
     // distance to the region where it holds, 0 for a face sheet); face sheet j's (@a j < np)
     // distances to sheetDistance, an edge sheet's (@a j = np) bound to regions.
+    std::vector<Implicit::Ptr> faceSheets(nc * np); // kept for their creases (below)
     auto sheetAt = [&](std::size_t c, std::size_t j, const Implicit::Ptr& field, auto&& wanted) {
         std::size_t idx[kMaxBatch], m = 0;
         double px[kMaxBatch], py[kMaxBatch], pz[kMaxBatch], region[kMaxBatch];
@@ -1026,6 +1030,7 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
         sheetChildren[c] = field;
         const auto sheet =
             std::make_shared<Blend>(blend.op(), blend.kernel(), std::move(sheetChildren));
+        if (j < np) faceSheets[c * np + j] = sheet;
         double sv[kMaxBatch];
         FootPoints feet;
         FootQuery withFeet = query;
@@ -1189,7 +1194,36 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
             done[i] = true;
             continue;
         }
-        if (!(best[i] <= below + query.tolerance)) continue;
+        if (!(best[i] <= below + query.tolerance)) {
+            // Where two face sheets meet at a sharp edge of F (a shrunk box's or cone's edge
+            // the other children do not round), the nearest point can be on their crease,
+            // which neither sheet's foot point is: offered from p.
+            for (std::size_t j = 0; j < ps.size(); ++j) {
+                for (std::size_t k = j + 1; k < ps.size(); ++k) {
+                    if (std::isnan(sheetDistance[i * np + j]) ||
+                        std::isnan(sheetDistance[i * np + k]) || !faceSheets[c * np + j] ||
+                        !faceSheets[c * np + k]) {
+                        continue;
+                    }
+                    Piece a, b;
+                    a.f = faceSheets[c * np + j].get();
+                    b.f = faceSheets[c * np + k].get();
+                    Vec3d q;
+                    double floor = 0.0;
+                    if (creasePoint(a, b, p, p, query.tolerance, q, floor)) offer(i, q);
+                }
+            }
+        }
+        if (!(best[i] <= below + query.tolerance)) {
+            // Not certified: the nearest point found still bounds the lattice search's answer.
+            if (std::isfinite(best[i]) && !out.ok[i] &&
+                (!out.surface[i] || best[i] < std::abs(out.distance[i]))) {
+                out.surface[i] = true;
+                out.distance[i] = std::copysign(best[i], values[i]);
+                out.x[i] = bx[i], out.y[i] = by[i], out.z[i] = bz[i];
+            }
+            continue;
+        }
         out.ok[i] = true;
         out.surface[i] = false;
         out.distance[i] = std::copysign(best[i], values[i]);
@@ -1547,6 +1581,14 @@ public:
         return mFeet[c] ? mFeet[c]->distance[i] : value(c)[i];
     }
     bool certified(std::size_t c, std::size_t i) const { return !mFeet[c] || mFeet[c]->ok[i]; }
+    /// Child @a c's point of its surface at point @a i where its distance is not certified
+    /// (FootPoints::surface), to @a q; false where it has none.
+    bool surfacePoint(std::size_t c, std::size_t i, Vec3d& q) const
+    {
+        if (!mFeet[c] || mFeet[c]->ok[i] || !mFeet[c]->surface[i]) return false;
+        q = Vec3d(mFeet[c]->x[i], mFeet[c]->y[i], mFeet[c]->z[i]);
+        return true;
+    }
     /// Child @a c's value at point @a i.
     double childValue(std::size_t c, std::size_t i) const { return value(c)[i]; }
 
@@ -2069,6 +2111,25 @@ void csgFootPoints(const std::vector<Implicit::Ptr>& children, Csg::Op op, const
         out.x[i] = q[0];
         out.y[i] = q[1];
         out.z[i] = q[2];
+        if (out.ok[i]) continue;
+        // A child's point of its surface (its distance not certified) that lies outside every
+        // other term, within the tolerance, is a point of the node's surface too: the lattice
+        // search's answer is no farther (a shell's blend, whose sharp edge its sheets found).
+        const Vec3d p(x[i], y[i], z[i]);
+        for (std::size_t c = 0; c < terms.size(); ++c) {
+            Vec3d s;
+            if (!terms.surfacePoint(c, i, s)) continue;
+            const double d = (s - p).length();
+            if ((out.surface[i] && d >= std::abs(out.distance[i])) || !(d < query.far)) continue;
+            bool on = true;
+            for (std::size_t o = 0; o < terms.size() && on; ++o) {
+                on = o == c || terms.sign(o) * children[o]->value(s) >= -query.tolerance;
+            }
+            if (!on) continue;
+            out.surface[i] = true;
+            out.distance[i] = std::copysign(d, out.distance[i]);
+            out.x[i] = s[0], out.y[i] = s[1], out.z[i] = s[2];
+        }
     }
 }
 
@@ -2516,7 +2577,9 @@ void Blend::footPoints(const double* x, const double* y, const double* z, const 
         const detail::BatchRows rows(mChildren.size() * n);
         childRows(x, y, z, n, rows.get(), nullptr);
         const bool led[kMaxBatch] = {};
-        return nearerFeet(x, y, z, values, n, query, rows.get(), led, out, false);
+        // The sheets' bounds need every child 1-Lipschitz (not a quadric's field).
+        return nearerFeet(x, y, z, values, n, query, rows.get(), led, out, false,
+                          isDistanceBound());
     }
     // With foot points asked for, the children's values and gradients once, for the lead rule
     // (the deciding child's gradient) and for the smooth iteration's start (the blend's
@@ -2609,7 +2672,7 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
 
 void Blend::nearerFeet(const double* x, const double* y, const double* z, const double* values,
                        std::size_t n, const FootQuery& query, const double* terms,
-                       const bool* led, FootPoints& out, bool allStarts) const
+                       const bool* led, FootPoints& out, bool allStarts, bool sheets) const
 {
     const std::size_t nc = mChildren.size();
     auto own = [&](std::size_t c, std::size_t i) { // child c's own value at point i
@@ -2645,7 +2708,7 @@ void Blend::nearerFeet(const double* x, const double* y, const double* z, const 
     }
     // Where the sheets certify the distance, nothing more is asked.
     bool done[kMaxBatch] = {};
-    if (anyKinked) {
+    if (anyKinked && sheets) {
         sheetFeet(*this, x, y, z, values, n, query, terms, pieces, rounds, kinked, out, done);
     }
     // Other points of the surface: the smooth iteration from each child's own foot point,
