@@ -893,8 +893,8 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
 /// Child C, a box or a capped cone (or a rounded box, or an offset of one: the same read with
 /// its pieces shifted and "positive" as "above -round", kinkPieces()), is the largest of its
 /// pieces' values phi_j (each the exact distance to its plane or cone side) inside it and
-/// wherever at most one of them is positive
-/// (region R0: C itself, and face j's region where only phi_j is), and at least that largest
+/// wherever at most one of them is positive (region R0: C itself, and face j's region where
+/// only phi_j is), and at least that largest
 /// everywhere; where only the two of an edge e are positive (R_e, of pieces meeting at right
 /// angles: rightAngles()) it is their hypot, the distance l_e to the edge. Within the ball B of
 /// radius r about p only the pieces within 2 r of the largest at p (J) can be the largest. The
@@ -903,7 +903,8 @@ bool creasePoint(const Piece& a, const Piece& b, const Vec3d& p, Vec3d q, double
 /// F = U(.., s C, ..) is, in B, the largest (s = 1) or the least (s = -1) of the face sheets
 /// G_j = U(.., s phi_j, ..) on R0, G_j on face j's region, and the edge sheet
 /// G_e = U(.., s l_e, ..) on R_e; each a smooth blend of exact SDFs (or of their offsets)
-/// whose distance d_j the blend's own rules certify. Every point y of B on the surface (F(y) = 0) lies
+/// whose distance d_j the blend's own rules certify. Every point y of B on the surface
+/// (F(y) = 0) lies
 /// - in R0, farther than the least d_j where F(p) s < 0 (p inside the sheets' intersection,
 ///   or outside their union: on F's side of every sheet), else farther than the largest d_j of
 ///   the sheets p is on F's side of (a crease where sheets meet), and:
@@ -1083,27 +1084,23 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
                 if (kinker[i] != c || inside[i]) continue;
                 const Vec3d p(x[i], y[i], z[i]);
                 if (!(e.distance(pieces[c], p) < best[i])) continue;
+                // The nearest point q of the line (or the corner) where the planes moved in by
+                // round meet, or of the rim's circle; then out towards p by round.
+                Vec3d q;
                 if (!e.rim) {
-                    // On the line (or the corner) where the planes moved in by round meet,
-                    // then out by round.
                     const double va = a.value(p) + e.round, vb = b.value(p) + e.round;
-                    Vec3d q = p - a.gradient(p) * va - b.gradient(p) * vb;
+                    q = p - a.gradient(p) * va - b.gradient(p) * vb;
                     if (e.corner) {
                         const Piece& third = pieces[c][e.c];
                         q -= third.gradient(p) * (third.value(p) + e.round);
                     }
-                    const double len = (p - q).length();
-                    if (e.round == 0.0 || len > 0.0) {
-                        offer(i, q + (p - q) * (e.round / std::max(len, 1e-300)));
-                    }
-                    continue;
+                } else {
+                    double sp, rp;
+                    Vec3d radial;
+                    e.meridian(p, sp, rp, radial);
+                    if (!(rp > 0.0)) continue;
+                    q = e.origin + e.axis * e.s0 + radial * e.r0;
                 }
-                double sp, rp;
-                Vec3d radial;
-                e.meridian(p, sp, rp, radial);
-                if (!(rp > 0.0)) continue;
-                // On the circle, then out by an offset's shift.
-                const Vec3d q = e.origin + e.axis * e.s0 + radial * e.r0;
                 const double len = (p - q).length();
                 if (e.round == 0.0 || len > 0.0) {
                     offer(i, q + (p - q) * (e.round / std::max(len, 1e-300)));
@@ -1200,9 +1197,9 @@ void sheetFeet(const Blend& blend, const double* x, const double* y, const doubl
             // which neither sheet's foot point is: offered from p.
             for (std::size_t j = 0; j < ps.size(); ++j) {
                 for (std::size_t k = j + 1; k < ps.size(); ++k) {
+                    // (A sheet distance is set only where its sheet was made.)
                     if (std::isnan(sheetDistance[i * np + j]) ||
-                        std::isnan(sheetDistance[i * np + k]) || !faceSheets[c * np + j] ||
-                        !faceSheets[c * np + k]) {
+                        std::isnan(sheetDistance[i * np + k])) {
                         continue;
                     }
                     Piece a, b;
@@ -2510,9 +2507,9 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
     // with the children's foot points alone for extra starts, and no Newton's method: on a
     // shell of a blend of a cone and a box those took 60% of the compute, and on 120 random
     // shrunk or shelled blends they moved the worst voxels little either way
-    // (docs/performance.md#true-distances). A
-    // non-uniformly scaled capped cylinder in a blend: its rims (edges, where the iteration
-    // cannot converge) far from the other child get the scaled shape's own foot points.
+    // (docs/performance.md#true-distances). A non-uniformly scaled capped cylinder in a blend:
+    // its rims (edges, where the iteration cannot converge) far from the other child get the
+    // scaled shape's own foot points.
     const std::size_t nc = mChildren.size();
     const double lead = mKernel.reach(query.tolerance / mChildLeadFactor) + mKernel.swell(nc);
     const double rho = mOp == Op::Union ? 1.0 : -1.0;

@@ -161,10 +161,10 @@ private:
     /// uncertified where a child may kink within their distance (mayKinkWithin()), then
     /// certified from the blend's sheets where the kink is one box's or capped cone's (the
     /// blend with one of its faces or edges in its place; if @a sheets: they need every child
-    /// 1-Lipschitz, isDistanceBound()), and nearer points of the surface
-    /// from each child's own foot point (and each face's, near a kink, if @a allStarts) where
-    /// still not certified, and from the other child's where a certified foot point may be one
-    /// of two; Newton's method where the iteration from a start fails only if @a allStarts.
+    /// 1-Lipschitz, isDistanceBound()), and nearer points of the surface from each child's
+    /// own foot point (and each face's, near a kink, if @a allStarts) where still not
+    /// certified, and from the other child's where a certified foot point may be one of two;
+    /// Newton's method where the iteration from a start fails only if @a allStarts.
     void nearerFeet(const double* x, const double* y, const double* z, const double* values,
                     std::size_t n, const FootQuery& query, const double* terms, const bool* led,
                     FootPoints& out, bool allStarts = true, bool sheets = true) const;
