@@ -229,6 +229,74 @@ TEST_F(TestCliDiff, CompareGradientJson)
     expectMentions(t.out, {"sphere.json", "angle", "magnitude"}, "table");
 }
 
+TEST_F(TestCliDiff, CheckDistances)
+{
+    // A rasterized sphere is its distance; checked against a sphere half a voxel smaller, its
+    // values inside are half a voxel too far (and nearer outside, of the wrong sign between).
+    rasterizeSphere("in.vdb");
+    std::ofstream(path("smaller.json"))
+        << R"({"voxel_size": 0.02, "shape": {"type": "sphere", "center": [0, 0, 0], "radius": 0.99}})";
+    auto parse = [](const RunResult& r) {
+        try {
+            return nlohmann::json::parse(r.out);
+        } catch (const std::exception& e) {
+            ADD_FAILURE() << "invalid JSON (" << e.what() << "):\n" << r.out;
+            return nlohmann::json::object();
+        }
+    };
+    const nlohmann::json ok = parse(runOk({"check-distances", data("sphere.json"), "in.vdb",
+                                           "--samples", "40", "--directions", "2000", "--json",
+                                           "--max-error", "0.001"}));
+    EXPECT_EQ(ok.value("sampled", 0), 40);
+    EXPECT_EQ(ok["voxels"].size(), 40u);
+    EXPECT_NEAR(ok.value("voxel_size", 0.0), 0.02, 1e-8);
+    EXPECT_EQ(ok["farther_than"].value("0.001", -1), 0) << ok.dump();
+    EXPECT_EQ(ok["nearer_than"].value("0.001", -1), 0) << ok.dump();
+    EXPECT_EQ(ok.value("sign_mismatches", -1), 0);
+    for (const auto& v : ok["voxels"]) {
+        const double r = std::sqrt(std::pow(v["world"][0].get<double>(), 2) +
+                                   std::pow(v["world"][1].get<double>(), 2) +
+                                   std::pow(v["world"][2].get<double>(), 2));
+        EXPECT_NEAR(v["searched"].get<double>(), std::abs(r - 1.0), 1e-5) << v.dump();
+    }
+
+    RunResult r = run({"check-distances", "smaller.json", "in.vdb", "--samples", "100",
+                       "--directions", "2000", "--max-error", "0.3", "--json"});
+    EXPECT_EQ(r.exitCode, 1) << r.err;
+    EXPECT_EQ(r.err.rfind("ivdb: error: ", 0), 0u) << r.err;
+    expectMentions(r.err, {"farther", "0.3"}, "check-distances --max-error");
+    const nlohmann::json far = parse(r);
+    EXPECT_GT(far["farther_than"].value("0.3", 0), 0) << far.dump();
+    EXPECT_GT(far["nearer_than"].value("0.3", 0), 0) << far.dump();
+    EXPECT_NEAR(far.value("worst_farther_voxels", 0.0), 0.5, 0.01) << far.dump();
+    EXPECT_GT(far.value("sign_mismatches", 0), 0);
+
+    // The scene rasterized in memory, near kinks only (a box's edges under a blend), as a table.
+    std::ofstream(path("blend.json")) << R"({"voxel_size": 0.05, "shape": {"type": "blend",
+        "op": "union", "p": 10, "children": [{"type": "box", "center": [0, 0, 0], "size": [1, 1, 1]},
+        {"type": "sphere", "center": [0.5, 0.5, 0], "radius": 0.3}]}})";
+    const RunResult t = runOk({"check-distances", "blend.json", "--near-kinks", "--samples", "20",
+                               "--directions", "2000", "--list", "3"});
+    expectMentions(t.out, {"blend.json rasterized: 20 of", "near a kink", "farther than the surface"},
+                   "table");
+    EXPECT_EQ(listing(), std::set<std::string>({"in.vdb", "smaller.json", "blend.json"}));
+
+    expectError(run({"check-distances", data("sphere.json"), "--samples", "0"}), {"--samples", "0"},
+                "check-distances --samples 0");
+    expectError(run({"check-distances", data("sphere.json"), "--samples", "-3"}),
+                {"--samples", "-3"}, "check-distances --samples -3");
+    expectError(run({"check-distances", data("sphere.json"), "--max-error", "-1"}),
+                {"--max-error", "-1"}, "check-distances --max-error -1");
+    expectError(run({"check-distances", data("sphere.json"), "--directions", "0"}),
+                {"--directions", "0"}, "check-distances --directions 0");
+    expectError(run({"check-distances", data("sphere.json"), "in.vdb", "--voxel-size", "0.01"}),
+                {"--voxel-size", "in.vdb"}, "check-distances with a file and --voxel-size");
+    expectError(run({"check-distances", data("sphere.json"), "missing.vdb"}), {"missing.vdb"},
+                "check-distances on a missing grid");
+    expectError(run({"check-distances", "missing.json"}), {"missing.json"},
+                "check-distances on a missing scene");
+}
+
 TEST_F(TestCliDiff, Help)
 {
     RunResult r = run({"--help"});
@@ -249,6 +317,11 @@ TEST_F(TestCliDiff, Help)
     r = run({"compare-gradient", "--help"});
     EXPECT_EQ(r.exitCode, 0) << r.err;
     expectMentions(r.out, {"--step", "--json", "--voxel-size"}, "ivdb compare-gradient --help");
+
+    r = run({"check-distances", "--help"});
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    expectMentions(r.out, {"--samples", "--directions", "--seed", "--near-kinks", "--max-error",
+                           "--json", "--voxel-size", "--distance"}, "ivdb check-distances --help");
     EXPECT_TRUE(listing().empty());
 }
 

@@ -618,6 +618,9 @@ TEST_F(TestCliOptions, NanAndInfinityOptionValuesAreRefused)
         {{"render", "s.vdb", "--columns", "inf"}, "x.png", {"--columns", "inf"}},
         {{"compare-gradient", "s.json", "--voxel-size", "nan"}, "", {"--voxel-size", "nan"}},
         {{"compare-gradient", "s.json", "--half-width", "inf"}, "", {"--half-width", "inf"}},
+        {{"check-distances", "s.json", "--voxel-size", "nan"}, "", {"--voxel-size", "nan"}},
+        {{"check-distances", "s.json", "--max-error", "nan"}, "", {"--max-error", "nan"}},
+        {{"check-distances", "s.json", "--max-error", "inf"}, "", {"--max-error", "inf"}},
     };
     for (const Case& c : cases) expectRefusedWithoutOutput(c.args, c.output, c.mentions);
 }

@@ -102,6 +102,7 @@ void addInfo(CLI::App& app, Action& action);
 void addGradient(CLI::App& app, Action& action);
 void addCurvature(CLI::App& app, Action& action);
 void addCompareGradient(CLI::App& app, Action& action);
+void addCheckDistances(CLI::App& app, Action& action);
 void addCsg(CLI::App& app, Action& action);
 void addBlend(CLI::App& app, Action& action);
 void addBench(CLI::App& app, Action& action);

@@ -9,14 +9,15 @@ int run(int argc, char** argv)
     Program ivdb;
     ivdb.name = "ivdb";
     ivdb.description = "ivdb: implicit surfaces to sparse OpenVDB level sets";
-    ivdb.commandList = "rasterize, info, gradient, curvature, compare-gradient, csg, blend, mesh, "
-                       "glyphs, render, convert, plan, bench";
+    ivdb.commandList = "rasterize, info, gradient, curvature, compare-gradient, check-distances, "
+                       "csg, blend, mesh, glyphs, render, convert, plan, bench";
     ivdb.addCommands = [](CLI::App& app, Action& action) {
         addRasterize(app, action);
         addInfo(app, action);
         addGradient(app, action);
         addCurvature(app, action);
         addCompareGradient(app, action);
+        addCheckDistances(app, action);
         addCsg(app, action);
         addBlend(app, action);
         addMesh(app, action);

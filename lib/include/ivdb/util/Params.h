@@ -102,6 +102,8 @@ inline constexpr Param kFrames{"frames", "frame range"};
 inline constexpr Param kColumns{"columns", "contact sheet columns"};
 inline constexpr Param kParallelFrames{"parallel_frames", "frames made at once"};
 inline constexpr Param kRanks{"ranks", "number of ranks"};
+inline constexpr Param kSamples{"samples", "sampled voxels"};
+inline constexpr Param kDirections{"directions", "search directions"};
 } // namespace param
 
 namespace limits {
@@ -141,6 +143,10 @@ inline constexpr Limit kSheetTiles{param::kFrames, 1.0, 1024.0, false, false, "f
 inline constexpr Limit kParallelFrames{param::kParallelFrames, 0.0, 1024.0, false, false, "", "(0: automatic)"};
 /// Vertical field of view, degrees.
 inline constexpr Limit kFov{param::kFov, 0.0, 180.0, true, true, "degrees"};
+/// Voxels a distance check samples.
+inline constexpr Limit kSamples{param::kSamples, 1.0, 1e7};
+/// Points on each sphere of a brute-force surface search.
+inline constexpr Limit kDirections{param::kDirections, 1.0, 1e6};
 /// Runs per benchmark measurement.
 inline constexpr Limit kReps{param::kReps, 1.0, 100.0};
 /// Voxels across a benchmark scene's largest side.
