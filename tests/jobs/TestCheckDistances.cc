@@ -154,6 +154,33 @@ TEST_F(TestCheckDistances, CheckFindsValuesFartherOrNearerThanTheSurface)
     EXPECT_EQ(union2.fartherThan(1e-3), 0u);
 }
 
+TEST_F(TestCheckDistances, WrongSignsAreCountedBeyondAThousandthOfAVoxel)
+{
+    // A small sphere whose surface passes a millionth from voxel (5, 0, 0)'s centre: there the
+    // wrong sign is a 1e-4 voxel error and is taken; at (3, 0, 0), two voxels inside, it is not.
+    const double dx = 0.02;
+    writeText("small.json", "{\"voxel_size\": 0.02, \"shape\": {\"type\": \"sphere\", "
+                            "\"center\": [0, 0, 0], \"radius\": 0.100001}}");
+    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(0.100001f, openvdb::Vec3f(0.0f),
+                                                                         float(dx), 3.0f);
+    auto acc = grid->getAccessor();
+    ASSERT_TRUE(acc.isValueOn(openvdb::Coord(5, 0, 0)));
+    acc.setValue(openvdb::Coord(5, 0, 0), 1e-6f);
+    acc.setValue(openvdb::Coord(3, 0, 0), 0.04f);
+    writeGrid(path("small.vdb"), grid);
+    jobs::CheckDistancesOptions o;
+    o.raster.scene = path("small.json");
+    o.input = path("small.vdb");
+    o.samples = 100000;
+    o.directions = 2000;
+    const auto r = jobs::checkDistances(o);
+    EXPECT_EQ(r.voxels.size(), grid->activeVoxelCount());
+    EXPECT_EQ(r.signMismatches(), 1u);
+    for (const auto& v : r.voxels) {
+        if (!v.signAgrees) EXPECT_EQ(v.ijk, openvdb::Coord(3, 0, 0));
+    }
+}
+
 TEST_F(TestCheckDistances, SamplesAreChosenBySeedFromTheBandOrNearKinks)
 {
     jobs::CheckDistancesOptions o;

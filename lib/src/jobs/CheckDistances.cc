@@ -31,6 +31,8 @@ constexpr int kCapLevels = 3;
 constexpr int kCapPoints = 400;
 constexpr std::size_t kMaxCaps = 16;
 constexpr double kCapSpread = 2.5;
+/// Voxels within which of the surface a value may have either sign.
+constexpr double kSignSlack = 1e-3;
 /// The golden angle, radians: consecutive spiral points that never line up.
 const double kGolden = M_PI * (3.0 - std::sqrt(5.0));
 
@@ -248,9 +250,12 @@ CheckDistancesResult checkDistances(const CheckDistancesOptions& opt)
             if (cancelled) return;
             CheckedVoxel& v = result.voxels[i];
             const double own = shape->value(v.world);
-            v.signAgrees = own == 0.0 || v.value == 0.0 || (own < 0.0) == (v.value < 0.0);
             v.searched = search.distance(v.world, result.stepVoxels * dx,
                                          std::abs(v.value) + result.reachVoxels * dx);
+            // A wrong sign is off by the value and the distance together: within kSignSlack
+            // of the surface (float values, another evaluation order) either sign is taken.
+            v.signAgrees = own == 0.0 || v.value == 0.0 || (own < 0.0) == (v.value < 0.0) ||
+                           std::abs(v.value) + v.searched <= kSignSlack * dx;
             const std::size_t n = ++done;
             if (util::wasInterrupted(ro.interrupter, int(100 * n / coords.size()))) cancelled = true;
         }

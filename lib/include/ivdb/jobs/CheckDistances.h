@@ -74,7 +74,9 @@ struct CheckedVoxel
     /// SurfaceSearch::distance() from the centre, world units, searched up to a voxel beyond
     /// the value's magnitude (infinity: no surface point that near)
     double searched = std::numeric_limits<double>::infinity();
-    bool signAgrees = true;  ///< the value's sign is the shape's there (0 counts as either)
+    /// The value's sign is the shape's there, or the value and the distance found sum to at
+    /// most 0.001 voxel (a voxel that near the surface may have either sign; 0 counts as either)
+    bool signAgrees = true;
 };
 
 struct CheckDistancesResult
