@@ -43,9 +43,11 @@ def main():
         cmd = [args.ivdb, "check-distances", scene, "--json", "--samples", str(args.samples),
                "--seed", str(args.seed)] + (["--near-kinks"] if args.near_kinks else [])
         run = subprocess.run(cmd, capture_output=True, text=True)
+        if run.returncode < 0:
+            sys.exit(f"{scene}: ivdb was killed by signal {-run.returncode}:\n{run.stderr}")
         if run.returncode != 0:
             refused.append(scene)
-            print(f"{scene}: refused: {run.stderr.strip()}")
+            print(f"{scene}: refused (exit {run.returncode}): {run.stderr.strip()}")
             continue
         r = json.loads(run.stdout)
         checked += 1

@@ -287,6 +287,14 @@ TEST_F(TestCliDiff, CheckDistances)
                 {"--samples", "-3"}, "check-distances --samples -3");
     expectError(run({"check-distances", data("sphere.json"), "--max-error", "-1"}),
                 {"--max-error", "-1"}, "check-distances --max-error -1");
+    expectError(run({"check-distances", data("sphere.json"), "--seed", "-1"}), {"--seed", "-1"},
+                "check-distances --seed -1");
+    expectError(run({"check-distances", data("sphere.json"), "--list", "-5"}), {"--list", "-5"},
+                "check-distances --list -5");
+    // Nothing sampled (a sphere never kinks): --max-error cannot pass.
+    expectError(run({"check-distances", data("sphere.json"), "--voxel-size", "0.1", "--near-kinks",
+                     "--max-error", "0.1"}),
+                {"no voxel was checked", "--near-kinks"}, "check-distances with nothing sampled");
     expectError(run({"check-distances", data("sphere.json"), "--directions", "0"}),
                 {"--directions", "0"}, "check-distances --directions 0");
     expectError(run({"check-distances", data("sphere.json"), "in.vdb", "--voxel-size", "0.01"}),

@@ -122,6 +122,12 @@ int runCheck(CheckArgs& a)
     progress.clearLine();
     if (a.json) printJson(a, r);
     else printTable(a, r);
+    if (a.maxError && r.voxels.empty()) {
+        std::fprintf(stderr, "ivdb: error: no voxel was checked (%s), so --max-error cannot "
+                     "pass: check the scene or drop --near-kinks\n",
+                     a.job.nearKinks ? "none near a kink" : "the band is empty");
+        return 1;
+    }
     if (a.maxError && (r.fartherThan(*a.maxError) > 0 || r.signMismatches() > 0)) {
         std::fprintf(stderr, "ivdb: error: %zu of %zu sampled voxels are more than %g "
                      "voxel farther than the surface (worst %.4g), %zu of the wrong sign\n",
@@ -154,7 +160,9 @@ void addCheckDistances(CLI::App& app, Action& action)
             "Points on each sphere of the search (more finds thinner features)",
             &param::kDirections)
         ->capture_default_str();
-    cmd.add("--seed", a->job.seed, "Which voxels are sampled")->capture_default_str();
+    cmd.add("--seed", a->job.seed, "Which voxels are sampled (a whole number >= 0)")
+        ->capture_default_str()
+        ->check(CLI::NonNegativeNumber);
     cmd.flag("--near-kinks", a->job.nearKinks,
              "Sample only voxels within whose distance the shape may kink (a box's or capped "
              "shape's edges under a blend), where nearest points are hardest to find");
@@ -170,7 +178,8 @@ void addCheckDistances(CLI::App& app, Action& action)
             },
             "VOXELS"));
     cmd.add("--list", a->listed, "Farthest voxels listed in the table")
-        ->capture_default_str();
+        ->capture_default_str()
+        ->check(CLI::NonNegativeNumber);
     cmd.flag("--json", a->json, "Print JSON (every sampled voxel) instead of a table");
     cmd.onRun(action, [a]() { return runCheck(*a); });
 }

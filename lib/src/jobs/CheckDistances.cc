@@ -14,6 +14,7 @@
 #include <atomic>
 #include <cmath>
 #include <random>
+#include <string>
 
 namespace ivdb::jobs {
 
@@ -50,6 +51,11 @@ SurfaceSearch::SurfaceSearch(const implicit::Implicit& shape, int directions): m
 
 double SurfaceSearch::distance(const Vec3d& p, double step, double reach) const
 {
+    if (!(step > 0.0) || !std::isfinite(step) || !(reach >= 0.0) || !std::isfinite(reach)) {
+        OPENVDB_THROW(openvdb::ValueError, "a surface search needs a finite step > 0 and a finite "
+                      "reach >= 0, got step " + std::to_string(step) + " and reach " +
+                      std::to_string(reach));
+    }
     const double own = mShape.value(p);
     if (own == 0.0) return 0.0;
     const bool inside = own < 0.0;
@@ -85,11 +91,12 @@ double SurfaceSearch::distance(const Vec3d& p, double step, double reach) const
     };
 
     // The whole sphere, a step at a time.
+    const std::uint64_t steps = std::uint64_t(std::ceil(reach / step));
     double lo = 0.0, hi = 0.0;
-    for (int k = 1;; ++k) {
-        hi = std::min(k * step, reach);
+    for (std::uint64_t k = 1;; ++k) {
+        hi = k >= steps ? reach : double(k) * step;
         if (reaches(mDirections, hi, nullptr)) break;
-        if (hi >= reach) return std::numeric_limits<double>::infinity();
+        if (k >= steps) return std::numeric_limits<double>::infinity();
         lo = hi;
     }
     hi = bisect(mDirections, lo, hi);
@@ -119,10 +126,13 @@ double SurfaceSearch::distance(const Vec3d& p, double step, double reach) const
                 cap.push_back(c * std::cos(rho) + (u * std::cos(phi) + w * std::sin(phi)) * std::sin(rho));
             }
         }
-        double capLo = hi;
-        do capLo = std::max(0.0, capLo - step);
-        while (capLo > 0.0 && reaches(cap, capLo, nullptr));
-        hi = bisect(cap, capLo, hi);
+        // Down a step at a time while the cap reaches (at most to p), then bisect the last step.
+        double capHi = hi, capLo = std::max(0.0, hi - step);
+        while (capLo > 0.0 && reaches(cap, capLo, nullptr)) {
+            capHi = capLo;
+            capLo = std::max(0.0, capLo - step);
+        }
+        hi = bisect(cap, capLo, capHi);
         centers.clear();
         reaches(cap, hi, &centers);
         spread *= kCapSpread * std::sqrt(M_PI / kCapPoints);
@@ -210,8 +220,8 @@ CheckDistancesResult checkDistances(const CheckDistancesOptions& opt)
         if (ro.voxelSize || ro.halfWidth || ro.distance) {
             const Param& p = ro.voxelSize ? param::kVoxelSize
                              : ro.halfWidth ? param::kHalfWidth : param::kDistance;
-            throw ParamError(p, "is the input grid's (" + opt.input + "): give it only when the "
-                             "scene is rasterized");
+            throw ParamError(p, "applies only when the scene is rasterized, not to an input grid (" +
+                             opt.input + ")");
         }
         const io::GridRef ref = io::GridRef::parse(opt.input);
         grid = readLevelSet(ref.file, ref.grid);

@@ -37,6 +37,7 @@ public:
     /// @brief The least radius, within step / 2^20, at which a sphere about @a p (or a cap of
     /// the refinement) first holds a point of the other sign than @a p, stepping by @a step up
     /// to @a reach; infinity if none within @a reach; 0 if p is on the surface.
+    /// @throw openvdb::ValueError unless @a step > 0 and @a reach >= 0 are finite
     double distance(const Vec3d& p, double step, double reach) const;
 
     const std::vector<Vec3d>& directions() const { return mDirections; }
@@ -106,7 +107,8 @@ struct CheckDistancesResult
 /// scene's at its start frame).
 /// @throw scene::SceneError for a bad scene; ParamError for a bad setting ("samples",
 /// "directions", or a rasterizing one, which an input also refuses); openvdb::IoError or
-/// ParamError ("grid") for an input that cannot be read; openvdb::RuntimeError when the
+/// ParamError ("grid") for an input that cannot be read, openvdb::ValueError for one with
+/// values that are not finite; openvdb::RuntimeError when the
 /// rasterized surface has no voxel, or on interruption. Nothing is written.
 CheckDistancesResult checkDistances(const CheckDistancesOptions& options);
 
