@@ -27,6 +27,20 @@ struct CheckArgs
     bool json = false;
 };
 
+/// Accepts a whole number >= 0 (an unsigned option would wrap a negative value); CLI11 names
+/// the option in the message.
+CLI::Validator wholeNumber()
+{
+    return CLI::Validator(
+        [](std::string& v) -> std::string {
+            std::uint64_t n = 0;
+            return v.find('-') == std::string::npos && CLI::detail::lexical_cast(v, n)
+                       ? std::string()
+                       : "must be a whole number >= 0, got " + v;
+        },
+        "N>=0");
+}
+
 /// The error thresholds the counts are given at, in voxels.
 constexpr double kThresholds[] = {0.001, 0.01, 0.05, 0.1, 0.3, 1.0};
 
@@ -162,7 +176,7 @@ void addCheckDistances(CLI::App& app, Action& action)
         ->capture_default_str();
     cmd.add("--seed", a->job.seed, "Which voxels are sampled (a whole number >= 0)")
         ->capture_default_str()
-        ->check(CLI::NonNegativeNumber);
+        ->check(wholeNumber());
     cmd.flag("--near-kinks", a->job.nearKinks,
              "Sample only voxels within whose distance the shape may kink (a box's or capped "
              "shape's edges under a blend), where nearest points are hardest to find");
@@ -174,12 +188,12 @@ void addCheckDistances(CLI::App& app, Action& action)
                 double e = 0.0;
                 return CLI::detail::lexical_cast(v, e) && std::isfinite(e) && e >= 0.0
                            ? std::string()
-                           : "--max-error must be a finite number of voxels >= 0, got " + v;
+                           : "must be a finite number of voxels >= 0, got " + v;
             },
             "VOXELS"));
     cmd.add("--list", a->listed, "Farthest voxels listed in the table")
         ->capture_default_str()
-        ->check(CLI::NonNegativeNumber);
+        ->check(wholeNumber());
     cmd.flag("--json", a->json, "Print JSON (every sampled voxel) instead of a table");
     cmd.onRun(action, [a]() { return runCheck(*a); });
 }
