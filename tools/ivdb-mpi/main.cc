@@ -130,9 +130,7 @@ int runRasterize(RasterizeArgs& a)
 {
     const bool printer = worldRank() == 0;
     a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
-    if (!a.distance.empty()) {
-        a.job.distance = a.distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
-    }
+    applyDistance(a.job, a.distance);
     std::optional<Progress> progress;
     if (a.seq.wanted(a.job.output)) {
         // Every rank stops its frames on a signal (mpirun passes one to every rank).

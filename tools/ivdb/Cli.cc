@@ -209,6 +209,13 @@ void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& d
         ->check(CLI::IsMember({"exact", "bound"}));
 }
 
+void applyDistance(jobs::RasterizeOptions& job, const std::string& distance)
+{
+    if (!distance.empty()) {
+        job.distance = distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
+    }
+}
+
 void addSequenceOptions(Command& cmd, SequenceArgs& seq)
 {
     cmd.add("--frames", seq.frames, "Frames of a keyed scene to write, A-B[:STEP] or A (default: "

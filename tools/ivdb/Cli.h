@@ -153,6 +153,10 @@ void addWriteOptions(Command& cmd, std::string& compression, bool& half);
 /// "bound"; empty: the scene's).
 void addRasterSettings(Command& cmd, jobs::RasterizeOptions& job, std::string& distance);
 
+/// @brief Set @a job's distance mode from the --distance text addRasterSettings() bound
+/// (empty: left unset, the scene's).
+void applyDistance(jobs::RasterizeOptions& job, const std::string& distance);
+
 /// @brief The options of a keyed scene's sequence (`ivdb rasterize`, `ivdb-mpi rasterize`).
 struct SequenceArgs
 {

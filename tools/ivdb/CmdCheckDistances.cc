@@ -125,9 +125,7 @@ void printTable(const CheckArgs& a, const jobs::CheckDistancesResult& r)
 
 int runCheck(CheckArgs& a)
 {
-    if (!a.distance.empty()) {
-        a.job.raster.distance = a.distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
-    }
+    applyDistance(a.job.raster, a.distance);
     check(limits::kSamples, double(a.samples));
     a.job.samples = std::size_t(a.samples);
     Progress progress("check-distances " + a.job.raster.scene);
@@ -138,15 +136,15 @@ int runCheck(CheckArgs& a)
     else printTable(a, r);
     if (a.maxError && r.voxels.empty()) {
         std::fprintf(stderr, "ivdb: error: no voxel was checked (%s), so --max-error cannot "
-                     "pass: check the scene or drop --near-kinks\n",
-                     a.job.nearKinks ? "none near a kink" : "the band is empty");
+                     "pass\n", a.job.nearKinks ? "none near a kink: drop --near-kinks"
+                                               : "the band has no voxel: check the scene");
         return 1;
     }
     if (a.maxError && (r.fartherThan(*a.maxError) > 0 || r.signMismatches() > 0)) {
         std::fprintf(stderr, "ivdb: error: %zu of %zu sampled voxels are more than %g "
                      "voxel farther than the surface (worst %.4g), %zu of the wrong sign\n",
                      r.fartherThan(*a.maxError), r.voxels.size(), *a.maxError,
-                     r.voxels.empty() ? 0.0 : r.error(r.voxels.front()), r.signMismatches());
+                     r.error(r.voxels.front()), r.signMismatches());
         return 1;
     }
     return 0;
@@ -182,7 +180,7 @@ void addCheckDistances(CLI::App& app, Action& action)
              "shape's edges under a blend), where nearest points are hardest to find");
     cmd.add("--max-error", a->maxError,
             "Exit with status 1 if a sampled voxel is more than this many voxels farther than "
-            "the surface, or has the wrong sign")
+            "the surface or has the wrong sign, or if no voxel was sampled")
         ->check(CLI::Validator(
             [](std::string& v) -> std::string {
                 double e = 0.0;

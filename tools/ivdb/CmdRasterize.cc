@@ -41,9 +41,7 @@ int runRasterize(RasterizeArgs& a)
 {
     a.job.write.compression = enumOf<io::Compression>(a.compression, io::compressionNames());
     a.job.sampling = a.sampling == "dense" ? raster::Sampling::Dense : raster::Sampling::Sparse;
-    if (!a.distance.empty()) {
-        a.job.distance = a.distance == "bound" ? raster::Distance::Bound : raster::Distance::Exact;
-    }
+    applyDistance(a.job, a.distance);
     Progress progress("rasterize " + a.job.scene);
     a.job.interrupter = &progress;
     if (a.seq.wanted(a.job.output)) return runSequence(a, progress);

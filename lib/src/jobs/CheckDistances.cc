@@ -6,8 +6,6 @@
 #include <ivdb/jobs/Rasterize.h>
 #include <ivdb/util/Params.h>
 
-#include <openvdb/tree/LeafManager.h>
-
 #include <tbb/parallel_for.h>
 
 #include <algorithm>

@@ -158,9 +158,7 @@ double surfacePointNear(const implicit::Implicit& f, const Vec3d& p, const Vec3d
     double best = std::numeric_limits<double>::max();
     // Each stage's bisection ends within 1e-5 voxel of the surface (2^-15 of a quarter voxel),
     // far below the tolerance, so that no point is nearer than the surface by more.
-    // The first stage walks: while its nearest point lies in the cube's outer layer and is
-    // nearer than the last one (the first cube's: than the crossing) by kWalkGain, a cube about
-    // it follows.
+    // The first stage walks (above); the first cube's gain is over the crossing's distance.
     const double h = 0.25 * dx;
     double last = dist;
     for (int walk = 0; walk <= kSurfaceWalks; ++walk) {
