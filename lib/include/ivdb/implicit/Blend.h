@@ -43,7 +43,29 @@ struct BlendKernel
     double reach(double toleranceWorld) const;
     /// @brief "p = 4" or "k = 0.1", for messages.
     std::string describe() const;
+
+    /// @brief Where the lead rule hands over to the deciding term's distance
+    /// (docs/method.md#the-lead-rules-hand-over), for @a n exact-distance terms and a distance
+    /// tolerance @a toleranceWorld: the term's distance is the blend's within the tolerance
+    /// where its lead (the next term less it, less twice its depth inside) is at least @a edge;
+    /// over the @a width below the edge the answer ramps (handoverRamp()) from the blend's own
+    /// distance to it. The smooth minimum's lead answers are exact: no ramp (width 0).
+    struct Handover
+    {
+        double edge = 0.0;  ///< world units
+        double width = 0.0; ///< world units
+    };
+    Handover handover(double toleranceWorld, std::size_t n) const;
 };
+
+/// @brief The hand-over's ramp (BlendKernel::Handover): 0 at @a u <= 0, 1 at @a u >= 1, the
+/// quintic 6u^5 - 15u^4 + 10u^3 between, whose first and second derivatives are 0 at both ends,
+/// so second differences across the zone see no step.
+inline double handoverRamp(double u)
+{
+    u = std::min(std::max(u, 0.0), 1.0);
+    return u * u * u * (u * (u * 6.0 - 15.0) + 10.0);
+}
 
 /// @brief The blended value of the signed terms @a t (children's values, negated for the ones a
 /// difference subtracts): union -(1/p) ln sum exp(-p t_i), intersection and difference
