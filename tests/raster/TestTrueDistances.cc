@@ -2231,66 +2231,80 @@ TEST_F(TestTrueDistances, BlendIsTheDistanceToItsSurface)
 // rule takes over (a child's lead 0.4 to 0.65 world) in the slab |z| <= 1 voxel, against the
 // surface of revolution (tests/BlendOfRevolution.h): the second differences of their errors,
 // and the mean curvature (diff::curvature) of the grid against that of the reference's distances.
+// Twice: as a blend of two spheres (the lead rule of exact SDFs), and with one sphere in a union
+// with a small sphere far down the axis, which makes that child a CSG node, not an exact SDF (the
+// rule with the deciding child's own distance), and changes nothing near the ring.
 TEST_F(TestTrueDistances, BlendHandsOverToItsChildrenWithoutAStep)
 {
     const double dx = 0.0025, c = 0.35, radius = 0.6, p = 20.0;
     const auto kernel = implicit::BlendKernel::superElliptic(p);
-    auto blend = std::make_shared<implicit::Blend>(implicit::CsgOp::Union, kernel,
-        std::vector<implicit::Implicit::Ptr>{std::make_shared<implicit::Sphere>(Vec3d(-c, 0, 0), radius),
-                                             std::make_shared<implicit::Sphere>(Vec3d(c, 0, 0), radius)});
-    const auto g = raster::rasterize(blend, settings(dx));
     const test::BlendOfRevolution exact([&](double u, double v) {
         const double t[2] = {u, v};
         return kernel.combine(implicit::CsgOp::Union, t, 2);
     }, c, radius);
-    auto lead = [&](const openvdb::Coord& ijk) {
-        const Vec3d q = g->indexToWorld(ijk);
-        const double a = (q - Vec3d(-c, 0, 0)).length() - radius, b = (q - Vec3d(c, 0, 0)).length() - radius;
-        return std::abs(a - b);
-    };
-    // The voxels checked (within a voxel of the surface), and the reference's distances over their
-    // stencils (in voxels).
-    std::vector<openvdb::Coord> ring;
-    auto reference = openvdb::FloatGrid::create(float(3.0 * dx));
-    reference->setTransform(g->transform().copy());
-    auto ref = reference->getAccessor();
-    for (auto it = g->cbeginValueOn(); it; ++it) {
-        const openvdb::Coord ijk = it.getCoord();
-        if (std::abs(ijk.z()) > 1 || std::abs(*it) > dx || lead(ijk) < 0.4 || lead(ijk) > 0.65) continue;
-        ring.push_back(ijk);
-        for (int i = -1; i <= 1; ++i)
-        for (int j = -1; j <= 1; ++j)
-        for (int k = -1; k <= 1; ++k) {
-            const openvdb::Coord n = ijk.offsetBy(i, j, k);
-            if (ref.isValueOn(n)) continue;
-            const Vec3d q = g->indexToWorld(n);
-            ref.setValue(n, float(exact.distance(q.x(), std::hypot(q.y(), q.z()), 0.2)));
+    const auto left = std::make_shared<implicit::Sphere>(Vec3d(-c, 0, 0), radius);
+    const auto right = std::make_shared<implicit::Sphere>(Vec3d(c, 0, 0), radius);
+    const implicit::Implicit::Ptr leftInAUnion = std::make_shared<implicit::Csg>(
+        implicit::CsgOp::Union, std::vector<implicit::Implicit::Ptr>{
+            left, std::make_shared<implicit::Sphere>(Vec3d(-3.0, 0, 0), 0.05)});
+    for (const auto& first : {implicit::Implicit::Ptr(left), leftInAUnion}) {
+        const char* name = first == leftInAUnion ? "child-lead rule" : "lead rule";
+        auto blend = std::make_shared<implicit::Blend>(implicit::CsgOp::Union, kernel,
+            std::vector<implicit::Implicit::Ptr>{first, right});
+        const auto g = raster::rasterize(blend, settings(dx));
+        auto lead = [&](const openvdb::Coord& ijk) {
+            const Vec3d q = g->indexToWorld(ijk);
+            return std::abs(left->value(q) - right->value(q));
+        };
+        // The voxels checked (within a voxel of the surface), and the reference's distances over
+        // their stencils.
+        std::vector<openvdb::Coord> ring;
+        auto reference = openvdb::FloatGrid::create(float(3.0 * dx));
+        reference->setTransform(g->transform().copy());
+        auto ref = reference->getAccessor();
+        for (auto it = g->cbeginValueOn(); it; ++it) {
+            const openvdb::Coord ijk = it.getCoord();
+            if (std::abs(ijk.z()) > 1 || std::abs(*it) > dx || lead(ijk) < 0.4 || lead(ijk) > 0.65) {
+                continue;
+            }
+            ring.push_back(ijk);
+            for (int i = -1; i <= 1; ++i)
+            for (int j = -1; j <= 1; ++j)
+            for (int k = -1; k <= 1; ++k) {
+                const openvdb::Coord n = ijk.offsetBy(i, j, k);
+                if (ref.isValueOn(n)) continue;
+                const Vec3d q = g->indexToWorld(n);
+                ref.setValue(n, float(exact.distance(q.x(), std::hypot(q.y(), q.z()), 0.2)));
+            }
         }
-    }
-    ASSERT_GT(ring.size(), 2000u);
-    const auto acc = g->getConstAccessor();
-    auto error = [&](const openvdb::Coord& ijk) {
-        return (double(acc.getValue(ijk)) - double(ref.getValue(ijk))) / dx;
-    };
-    double worstStep = 0.0;
-    for (const openvdb::Coord& ijk : ring) {
-        for (int axis = 0; axis < 3; ++axis) {
-            openvdb::Coord e(0, 0, 0);
-            e[axis] = 1;
-            worstStep = std::max(worstStep, std::abs(error(ijk + e) - 2.0 * error(ijk) + error(ijk - e)));
+        ASSERT_GT(ring.size(), 2000u) << name;
+        const auto acc = g->getConstAccessor();
+        auto error = [&](const openvdb::Coord& ijk) { // voxels
+            return (double(acc.getValue(ijk)) - double(ref.getValue(ijk))) / dx;
+        };
+        double worstStep = 0.0;
+        for (const openvdb::Coord& ijk : ring) {
+            for (int axis = 0; axis < 3; ++axis) {
+                openvdb::Coord e(0, 0, 0);
+                e[axis] = 1;
+                worstStep = std::max(worstStep,
+                                     std::abs(error(ijk + e) - 2.0 * error(ijk) + error(ijk - e)));
+            }
         }
+        const auto mean = diff::curvature(*g, diff::Curvature::Mean);
+        const auto meanRef = diff::curvature(*reference, diff::Curvature::Mean);
+        const auto h = mean->getConstAccessor(), hRef = meanRef->getConstAccessor();
+        double worstCurvature = 0.0;
+        for (const openvdb::Coord& ijk : ring) {
+            worstCurvature = std::max(
+                worstCurvature, std::abs(double(h.getValue(ijk)) / double(hRef.getValue(ijk)) - 1.0));
+        }
+        std::printf("%s: %zu voxels, second differences of the error up to %.2g voxel, mean "
+                    "curvature off by up to %.2g%%\n", name, ring.size(), worstStep,
+                    100.0 * worstCurvature);
+        EXPECT_LT(worstStep, 1.5e-4) << name;
+        EXPECT_LT(worstCurvature, 0.005) << name;
     }
-    const auto mean = diff::curvature(*g, diff::Curvature::Mean);
-    const auto meanRef = diff::curvature(*reference, diff::Curvature::Mean);
-    const auto h = mean->getConstAccessor(), hRef = meanRef->getConstAccessor();
-    double worstCurvature = 0.0;
-    for (const openvdb::Coord& ijk : ring) {
-        worstCurvature = std::max(worstCurvature, std::abs(double(h.getValue(ijk)) / double(hRef.getValue(ijk)) - 1.0));
-    }
-    std::printf("%zu voxels: second differences of the error up to %.2g voxel, mean curvature "
-                "off by up to %.2g%%\n", ring.size(), worstStep, 100.0 * worstCurvature);
-    EXPECT_LT(worstStep, 1.5e-4);
-    EXPECT_LT(worstCurvature, 0.005);
 }
 
 TEST_F(TestTrueDistances, DataScenesNeedNoSweeping)
