@@ -1974,6 +1974,52 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreNoFartherThanTheirSurfaces)
     }
 }
 
+// Outside a smooth union of a rotated box and a torus (k = 5.1 voxels, a random scene of
+// scripts/random_blends.py), the voxel (37, 26, 0) has its nearest point on the box's edge,
+// which the blend rounds to a third of a voxel there; the iteration from the box's own foot
+// point (on the sharp edge) did not reach it, and the answer was certified 0.12 voxel too far.
+// The iteration from a child's foot point now starts where the segment to it crosses the
+// surface, and that crossing, nearer than the certified answer, shows it to be a farther foot
+// point (Blend::nearerFeet()). The voxels around that valley against a brute-force search
+// (4,000 directions), as the test above, within 0.015 voxel but two not fixed yet: (35, 30, 1),
+// whose nearest of three foot points in the valley's floor no start reaches (0.13 voxel, the
+// lattice search's approximate answer), and (39, 21, 0), another on the rounded edge that
+// no start is offered for (0.086, certified).
+TEST_F(TestTrueDistances, SmoothUnionValleyFindsItsNearestFootPoint)
+{
+    const double dx = 0.01;
+    const auto box = std::make_shared<implicit::Transform>(
+        std::make_shared<implicit::Box>(Vec3d(-0.015, -0.051, 0.011), Vec3d(0.465, 0.469, 0.692)),
+        Vec3d(-0.01, 0.098, 0.044), Vec3d(10.1, -47.4, 18.3), Vec3d(1.0));
+    const auto torus = std::make_shared<implicit::Torus>(Vec3d(0.159, 0.133, -0.083), 0.334, 0.093);
+    const auto shape = std::make_shared<implicit::Blend>(implicit::CsgOp::Union,
+        implicit::BlendKernel::polynomial(0.051), std::vector<implicit::Implicit::Ptr>{box, torus});
+    const auto g = raster::rasterize(shape, settings(dx));
+    const std::vector<Vec3d> dirs = sphereDirections(4000);
+    const openvdb::CoordBBox valley(openvdb::Coord(31, 18, -4), openvdb::Coord(42, 34, 4));
+    const openvdb::Coord fixed(37, 26, 0), left[2] = {{35, 30, 1}, {39, 21, 0}};
+    const auto acc = g->getConstAccessor();
+    int checked = 0;
+    double farther = -1.0, atFixed = -1.0;
+    for (auto c = valley.begin(); c; ++c) {
+        if (!acc.isValueOn(*c)) continue;
+        const Vec3d p = Vec3d((*c).x(), (*c).y(), (*c).z()) * dx;
+        const double hi = searchedSurfaceDistance(*shape, p, dirs, 4.0 * dx);
+        if (std::isnan(hi)) continue;
+        const double excess = (std::abs(double(acc.getValue(*c))) - hi) / dx;
+        const bool known = *c == left[0] || *c == left[1];
+        if (!known) farther = std::max(farther, excess);
+        if (*c == fixed) atFixed = excess;
+        EXPECT_LE(excess, known ? 0.14 : 0.015) << "at " << *c << ": " << acc.getValue(*c) / dx
+            << " voxels, a surface point " << hi / dx << " voxels away";
+        ++checked;
+    }
+    EXPECT_GE(checked, 1000);
+    EXPECT_GE(atFixed, -0.015) << "the voxel fixed was not checked";
+    std::printf("valley of a box and a torus: %d voxels checked, at most %.2g voxel farther than "
+                "the search but at the two left (%.2g at the one fixed)\n", checked, farther, atFixed);
+}
+
 TEST_F(TestTrueDistances, BlendsOfCappedShapesAreCertifiedOnTheirSheetsNearTheirKinks)
 {
     // Near a kink of a box's, a rounded box's or a capped cylinder's or cone's distance, the
