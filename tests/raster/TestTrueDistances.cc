@@ -1981,10 +1981,11 @@ TEST_F(TestTrueDistances, BlendsOfCappedShapesAreNoFartherThanTheirSurfaces)
 // The iteration from a child's foot point now starts where the segment to it crosses the
 // surface, and that crossing, nearer than the certified answer, shows it to be a farther foot
 // point (Blend::nearerFeet()). The voxels around that valley against a brute-force search
-// (4,000 directions), as the test above, within 0.015 voxel but two not fixed yet: (35, 30, 1),
-// whose nearest of three foot points in the valley's floor no start reaches (0.13 voxel, the
-// lattice search's approximate answer), and (39, 21, 0), another on the rounded edge that
-// no start is offered for (0.086, certified).
+// (4,000 directions, as the test above): none farther by more than 0.005 voxel (measured
+// 0.00052) or nearer by more than 0.01 (the search's own error), but two not fixed yet:
+// (35, 30, 1), whose nearest of three foot points in the valley's floor no start reaches (0.13
+// voxel, the lattice search's approximate answer), and (39, 21, 0), another on the rounded edge
+// that no start is offered for (0.086, certified).
 TEST_F(TestTrueDistances, SmoothUnionValleyFindsItsNearestFootPoint)
 {
     const double dx = 0.01;
@@ -1998,24 +1999,29 @@ TEST_F(TestTrueDistances, SmoothUnionValleyFindsItsNearestFootPoint)
     const std::vector<Vec3d> dirs = sphereDirections(4000);
     const openvdb::CoordBBox valley(openvdb::Coord(31, 18, -4), openvdb::Coord(42, 34, 4));
     const openvdb::Coord fixed(37, 26, 0), left[2] = {{35, 30, 1}, {39, 21, 0}};
+    const double leftLimit[2] = {0.135, 0.09};
     const auto acc = g->getConstAccessor();
     int checked = 0;
-    double farther = -1.0, atFixed = -1.0;
+    bool fixedChecked = false;
+    double farther = -1.0, atFixed = 0.0;
     for (auto c = valley.begin(); c; ++c) {
         if (!acc.isValueOn(*c)) continue;
         const Vec3d p = Vec3d((*c).x(), (*c).y(), (*c).z()) * dx;
         const double hi = searchedSurfaceDistance(*shape, p, dirs, 4.0 * dx);
         if (std::isnan(hi)) continue;
         const double excess = (std::abs(double(acc.getValue(*c))) - hi) / dx;
-        const bool known = *c == left[0] || *c == left[1];
-        if (!known) farther = std::max(farther, excess);
-        if (*c == fixed) atFixed = excess;
-        EXPECT_LE(excess, known ? 0.14 : 0.015) << "at " << *c << ": " << acc.getValue(*c) / dx
-            << " voxels, a surface point " << hi / dx << " voxels away";
+        const int known = *c == left[0] ? 0 : *c == left[1] ? 1 : -1;
+        if (known < 0) farther = std::max(farther, excess);
+        if (*c == fixed) atFixed = excess, fixedChecked = true;
+        EXPECT_LE(excess, known < 0 ? 0.005 : leftLimit[known])
+            << "at " << *c << ": " << acc.getValue(*c) / dx << " voxels, a surface point "
+            << hi / dx << " voxels away";
+        EXPECT_GE(excess, -0.01) << "at " << *c << ": " << acc.getValue(*c) / dx
+                                 << " voxels, nearer than the surface found, " << hi / dx;
         ++checked;
     }
     EXPECT_GE(checked, 1000);
-    EXPECT_GE(atFixed, -0.015) << "the voxel fixed was not checked";
+    EXPECT_TRUE(fixedChecked) << "the voxel fixed is not in the band";
     std::printf("valley of a box and a torus: %d voxels checked, at most %.2g voxel farther than "
                 "the search but at the two left (%.2g at the one fixed)\n", checked, farther, atFixed);
 }

@@ -213,7 +213,7 @@ BlendKernel::Handover BlendKernel::handover(double toleranceWorld, std::size_t n
     // At lead g the term's distance is within tol(g) = exp(-p (g - swell)) / p of the blend's
     // (reach() solved for the tolerance), so over the zone [edge - 1/p, edge] the ramped answer
     // is off by at most tol(edge) max_u ramp(u) e^(1 - u) = 1.1535 tol(edge): the edge is where
-    // that is the tolerance. (A zone of 2/p, with its edge ln(1.54 / 1.15) / p farther out, bent
+    // that is the tolerance. (A zone of 2/p, with its edge ln(1.54 / 1.16) / p farther out, bent
     // the answers no less: the mean curvature of a blend of two spheres, p = 20 at voxel
     // 0.0025, off by up to 0.35% either way, from the lead rule's kink at the surface.)
     constexpr double kRampGain = 1.16;
