@@ -2599,8 +2599,7 @@ void Blend::childLeadFootPoints(const double* x, const double* y, const double* 
     if (anyChildKinks(mChildren)) nearerFeet(x, y, z, values, n, query, terms, led, out, false);
     for (std::size_t i = 0; i < n && handover.width > 0.0; ++i) {
         if (!inZone[i] || !out.ok[i]) continue;
-        const double u = rho * handed[i];
-        const double margin = second[i] - u - 2.0 * std::max(-u, 0.0);
+        const double margin = leadMargin(rho * handed[i], second[i]);
         out.distance[i] = handedOver(out.distance[i], handed[i],
                                      handoverRamp((margin - start) / handover.width));
     }
@@ -2718,7 +2717,7 @@ void Blend::feetFromRows(const double* x, const double* y, const double* z, cons
     const double start = handover.edge - handover.width;
     for (std::size_t i = 0; i < n && handover.width > 0.0; ++i) {
         if (led[i] || !out.ok[i] || std::abs(values[i]) >= query.far) continue;
-        const double margin = second[i] - first[i] - 2.0 * std::max(-first[i], 0.0);
+        const double margin = leadMargin(first[i], second[i]);
         if (margin <= start) continue;
         const double s = handoverRamp((margin - start) / handover.width);
         out.distance[i] = handedOver(out.distance[i], rho * first[i], s);

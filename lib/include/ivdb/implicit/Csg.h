@@ -64,15 +64,24 @@ private:
     std::vector<double> mSpheres;
 };
 
+/// @brief The lead of the deciding term @a first over the next, @a second, in a union of
+/// distances, as the lead rule measures it: second - first less twice the deciding term's depth
+/// inside (max(0, -first)).
+inline double leadMargin(double first, double second)
+{
+    return second - first - 2.0 * (first < 0.0 ? -first : 0.0);
+}
+
 /// @brief The lead rule of unions of distances (docs/method.md#true-distances): with the two
 /// smallest terms @a first <= @a second of a union of exact (or 1-Lipschitz lower-bound)
 /// distances at a point, the deciding term's value is the distance to the union's surface
 /// unless a surface within @a reach of the crease can be nearer: true when the lead
-/// second - first is at least reach + 2 max(0, -first). Sharp CSG uses reach 0; the grid blend
-/// its blend's reach (the blended surface leaves the sharp one only there).
+/// (leadMargin()) is at least @a reach. Sharp CSG uses reach 0; the grid blend its blend's
+/// reach (the blended surface leaves the sharp one only there); the scene blend hands over to
+/// the deciding term below its edge (BlendKernel::Handover).
 inline bool leadKeepsDistance(double first, double second, double reach)
 {
-    return second - first >= reach + 2.0 * (first < 0.0 ? -first : 0.0);
+    return leadMargin(first, second) >= reach;
 }
 
 /// @brief Rigid motion and scale of a child: p = R S q + t, with R = Rz Ry Rx.
