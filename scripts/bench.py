@@ -110,6 +110,26 @@ def sphere_scene(folder, radius_voxels):
     return path
 
 
+def machine():
+    """The CPU's model, its cores and the version of ivdb's vectorized loops it runs (the first of
+    AVX-512, AVX2 and SSE2 its flags allow: util::machineInfo() in the library, which `ivdb bench`
+    prints): the ratios between arithmetic-bound shapes and the memory-bound exact sphere move
+    with it (docs/performance.md#set-up)."""
+    model, flags = "unknown CPU", set()
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                if key.strip() == "model name" and model == "unknown CPU":
+                    model = value.strip()
+                elif key.strip() == "flags" and not flags:
+                    flags = set(value.split())
+    except OSError:
+        pass
+    code = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE2"
+    return f"{model}, {os.cpu_count()} cores, vector code {code}"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--reps", type=int, default=5)
@@ -123,7 +143,7 @@ def main():
     big = 200 if args.quick else 400
 
     with tempfile.TemporaryDirectory() as tmp:
-        print(f"# ivdb benchmark ({os.cpu_count()} cores), medians of {reps} runs\n")
+        print(f"# ivdb benchmark ({machine()}), medians of {reps} runs\n")
         if args.section in ("csg", "all"):
             bench_csg(tmp, big, reps)
         if args.section in ("diff", "all"):

@@ -87,6 +87,9 @@ TEST_F(TestCliBench, DefaultScenesCsvPlotAndTable)
     ASSERT_GT(png.size(), 10000u);
     EXPECT_EQ(png.substr(1, 3), "PNG");
     EXPECT_NE(r.out.find("| sphere | 40 |"), std::string::npos) << r.out;
+    // The machine it ran on, first (TestMachine checks what it says).
+    EXPECT_EQ(r.out.rfind("Machine: ", 0), 0u) << r.out;
+    EXPECT_NE(r.out.find(" cores, vector code "), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("sphere sparse: time slope"), std::string::npos) << r.out;
     for (const char* s : {"sphere", "two_spheres", "spheres_1000", "two_spheres_exact",
                           "spheres_1000_exact"}) {

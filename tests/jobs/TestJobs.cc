@@ -14,6 +14,7 @@
 #include <ivdb/ops/Blend.h>
 #include <ivdb/ops/Csg.h>
 #include <ivdb/util/Params.h>
+#include <ivdb/util/System.h>
 
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
@@ -27,6 +28,9 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
+#include <regex>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -536,8 +540,36 @@ TEST_F(TestJobs, InfoAndBenchSweepInProcess)
     EXPECT_TRUE(fs::exists(r.csvPath));
     EXPECT_TRUE(r.pngPath.empty());
     EXPECT_NE(r.table.find("| sphere | 16 |"), std::string::npos) << r.table;
+    EXPECT_EQ(r.machine, util::machineInfo().describe());
     b.reps = 0;
     expectParamError([&] { jobs::benchSweep(b); }, "reps", {"s.vdb", "bench"});
+}
+
+// The machine a benchmark names: the CPU's model and the version of the vectorized loops it runs,
+// against /proc/cpuinfo read here (the first processor's model name and flags). The loops'
+// versions are AVX-512, AVX2 and the x86-64 baseline (src/util/Simd.h), the first the CPU
+// supports.
+TEST(TestMachine, NamesTheCpuAndTheVectorCodeItsFlagsAllow)
+{
+    const util::MachineInfo m = util::machineInfo();
+    EXPECT_GT(m.cores, 0u);
+    std::ifstream in("/proc/cpuinfo");
+    if (!in) GTEST_SKIP() << "no /proc/cpuinfo here";
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::smatch name, flags;
+    ASSERT_TRUE(std::regex_search(text, name, std::regex(R"(model name\s*:\s*([^\n]*\S))")));
+    EXPECT_EQ(m.cpu, name[1].str());
+    if (m.vectorCode.find("no run-time choice") != std::string::npos) {
+        GTEST_SKIP() << "built without per-CPU versions (sanitizers): " << m.vectorCode;
+    }
+    ASSERT_TRUE(std::regex_search(text, flags, std::regex(R"(\nflags\s*:([^\n]*))")));
+    std::istringstream words(flags[1].str());
+    std::vector<std::string> has{std::istream_iterator<std::string>(words),
+                                 std::istream_iterator<std::string>()};
+    auto flag = [&](const char* f) { return std::find(has.begin(), has.end(), f) != has.end(); };
+    EXPECT_EQ(m.vectorCode, flag("avx512f") ? "AVX-512" : flag("avx2") ? "AVX2" : "SSE2");
+    EXPECT_EQ(m.describe(), m.cpu + ", " + std::to_string(m.cores) + " cores, vector code " +
+                                m.vectorCode);
 }
 
 } // namespace

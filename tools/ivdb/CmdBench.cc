@@ -109,7 +109,8 @@ int runBench(BenchArgs& a)
         a.job.python = python();
     }
     const jobs::BenchResult r = jobs::benchSweep(a.job);
-    std::printf("%s\ncsv: %s\n", r.table.c_str(), r.csvPath.c_str());
+    std::printf("Machine: %s.\n\n%s\ncsv: %s\n", r.machine.c_str(), r.table.c_str(),
+                r.csvPath.c_str());
     if (!r.plotError.empty()) {
         throw std::runtime_error(r.plotError + ". Install python3-matplotlib (./scripts/deps.sh), "
                                  "or pass --no-plot");

@@ -334,6 +334,7 @@ BenchResult benchSweep(const BenchOptions& opt)
     }
     writeCsv(result.csvPath, result.rows, opt.reps);
     result.table = benchTable(result.rows, scenes, resolutions);
+    result.machine = util::machineInfo().describe();
     if (!result.pngPath.empty()) {
         const util::ProcessResult plot =
             util::runProcess({opt.python, opt.plotScript, result.csvPath, result.pngPath});

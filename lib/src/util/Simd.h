@@ -13,6 +13,7 @@
 #if defined(__x86_64__) && defined(__linux__) && (defined(__GNUC__) || defined(__clang__)) && \
     !defined(IVDB_SANITIZED)
 #define IVDB_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#define IVDB_HAS_VECTOR_CLONES 1 // util::machineInfo() names the version the loader picks
 #else
 #define IVDB_VECTOR_CLONES
 #endif

@@ -3,6 +3,8 @@
 
 #include <ivdb/util/Interrupt.h>
 
+#include "Simd.h"
+
 #include <openvdb/Exceptions.h>
 
 #include <algorithm>
@@ -12,6 +14,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 namespace ivdb::util {
 
@@ -43,6 +46,42 @@ double memoryBudget(std::uint64_t limit)
     if (limit) return double(limit);
     const double available = double(availableMemory()); // 0 when unknown
     return available > 0.0 ? kMemoryFraction * available : 1e18;
+}
+
+MachineInfo machineInfo()
+{
+    MachineInfo m;
+    m.cpu = "unknown";
+    std::ifstream in("/proc/cpuinfo");
+    std::string line;
+    while (std::getline(in, line)) {
+        if (line.compare(0, 10, "model name") != 0) continue;
+        const auto colon = line.find(':');
+        if (colon == std::string::npos) break;
+        std::string name = line.substr(colon + 1);
+        const auto first = name.find_first_not_of(" \t"), last = name.find_last_not_of(" \t");
+        if (first != std::string::npos) m.cpu = name.substr(first, last - first + 1);
+        break;
+    }
+    m.cores = std::thread::hardware_concurrency();
+#if defined(IVDB_HAS_VECTOR_CLONES)
+    // The loader's choice among IVDB_VECTOR_CLONES' versions: the first the CPU supports.
+    __builtin_cpu_init();
+    m.vectorCode = __builtin_cpu_supports("avx512f") ? "AVX-512"
+                 : __builtin_cpu_supports("avx2")    ? "AVX2"
+                                                     : "SSE2";
+#elif defined(__x86_64__)
+    m.vectorCode = "SSE2 (no run-time choice)";
+#else
+    m.vectorCode = "the compiler's default (no run-time choice)";
+#endif
+    return m;
+}
+
+std::string MachineInfo::describe() const
+{
+    return cpu + ", " + (cores ? std::to_string(cores) : std::string("?")) + " cores, vector code " +
+           vectorCode;
 }
 
 std::string extensionOf(const std::string& path)

@@ -72,6 +72,7 @@ struct BenchResult
     std::vector<BenchRow> rows;
     std::string csvPath, pngPath; ///< pngPath empty without a plot
     std::string table;            ///< a Markdown table of the sweep
+    std::string machine;          ///< where it ran (util::MachineInfo::describe())
     std::string plotOutput;       ///< what the plot script printed
     std::string plotError;        ///< why the plot failed (matplotlib missing?), or empty
 };

@@ -32,6 +32,23 @@ std::string formatBytes(double bytes);
 /// @brief An exception's message without OpenVDB's leading type name ("IoError: ...").
 std::string errorText(const std::exception& e);
 
+/// @brief The machine that runs this process, as benchmarks should name it: speed ratios
+/// between arithmetic-bound work (quadrics, blends) and memory-bound work (an exact sphere)
+/// depend on the CPU's vector width (docs/performance.md#set-up).
+struct MachineInfo
+{
+    std::string cpu;        ///< the CPU's model name (/proc/cpuinfo), or "unknown"
+    unsigned cores = 0;     ///< hardware threads (0 if unknown)
+    std::string vectorCode; ///< the version of the vectorized loops this CPU runs: "AVX-512",
+                            ///< "AVX2" or "SSE2" on x86-64, "... (no run-time choice)" where
+                            ///< the library has no per-CPU versions (sanitizers, other CPUs)
+    /// "AMD EPYC 7B13, 2 cores, vector code AVX2".
+    std::string describe() const;
+};
+
+/// @brief The running machine (MachineInfo).
+MachineInfo machineInfo();
+
 /// @brief A number as a person writes it: -1, 0.25, 1e-07 (shortest form that reads back).
 std::string formatNumber(double v);
 
