@@ -201,9 +201,23 @@ double searchedSurfaceDistance(const implicit::Implicit& shape, const Vec3d& p,
                                const std::vector<Vec3d>& dirs, double reach)
 {
     const bool inside = shape.value(p) < 0.0;
+    // The sphere's points in batches (values() is value() bit for bit, a virtual call a batch):
+    // most radii tried reach nothing, and every direction is evaluated there.
+    constexpr std::size_t kChunk = 128;
+    double x[kChunk], y[kChunk], z[kChunk], v[kChunk];
     auto reaches = [&](double radius) {
-        for (const Vec3d& d : dirs) {
-            if ((shape.value(p + d * radius) < 0.0) != inside) return true;
+        for (std::size_t b = 0; b < dirs.size(); b += kChunk) {
+            const std::size_t n = std::min(kChunk, dirs.size() - b);
+            for (std::size_t k = 0; k < n; ++k) {
+                const Vec3d q = p + dirs[b + k] * radius;
+                x[k] = q.x();
+                y[k] = q.y();
+                z[k] = q.z();
+            }
+            shape.values(x, y, z, v, n);
+            for (std::size_t k = 0; k < n; ++k) {
+                if ((v[k] < 0.0) != inside) return true;
+            }
         }
         return false;
     };
