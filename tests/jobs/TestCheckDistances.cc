@@ -113,9 +113,15 @@ TEST_F(TestCheckDistances, CheckFindsValuesFartherOrNearerThanTheSurface)
     jobs::CheckDistancesOptions o;
     o.raster.scene = path("sphere.json");
     o.input = path("exact.vdb");
+    // Sanitized builds (20x slower) check a third of the sphere's voxels; every check below
+    // holds voxel by voxel. The union's 400 stay: one of them is nearer by 0.1 voxel.
+#ifdef IVDB_SANITIZED
+    o.samples = 100;
+#else
     o.samples = 300;
+#endif
     const jobs::CheckDistancesResult exact = jobs::checkDistances(o);
-    EXPECT_EQ(exact.voxels.size(), 300u);
+    EXPECT_EQ(exact.voxels.size(), o.samples);
     EXPECT_EQ(exact.activeVoxels, grid->activeVoxelCount());
     EXPECT_NEAR(exact.voxelSize, dx, 1e-8);
     EXPECT_EQ(exact.fartherThan(1e-3), 0u);
