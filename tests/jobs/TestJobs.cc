@@ -557,8 +557,9 @@ TEST(TestMachine, NamesTheCpuAndTheVectorCodeItsFlagsAllow)
     if (!in) GTEST_SKIP() << "no /proc/cpuinfo here";
     std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     std::smatch name, flags;
-    ASSERT_TRUE(std::regex_search(text, name, std::regex(R"(model name\s*:\s*([^\n]*\S))")));
-    EXPECT_EQ(m.cpu, name[1].str());
+    // No model name (some CPUs' kernels give none): "unknown".
+    EXPECT_EQ(m.cpu, std::regex_search(text, name, std::regex(R"(model name[ \t]*:[ \t]*([^\n]*\S))"))
+                         ? name[1].str() : std::string("unknown"));
     if (m.vectorCode.find("no run-time choice") != std::string::npos) {
         GTEST_SKIP() << "built without per-CPU versions (sanitizers): " << m.vectorCode;
     }
