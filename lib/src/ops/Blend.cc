@@ -251,6 +251,87 @@ void seedVoxels(const Coord& origin, const MaskBits& voxels, InputAccessor& acc,
     }
 }
 
+/// The leaves of a mask as one list, for arrays indexed by leaf and voxel, with each leaf's
+/// neighbours.
+class LeafSet
+{
+public:
+    using IndexTree = openvdb::Int32Tree;
+    using IndexAccessor = openvdb::tree::ValueAccessor<const IndexTree>;
+
+    explicit LeafSet(const MaskTree& mask) : mIndex(-1)
+    {
+        openvdb::tree::ValueAccessor<IndexTree> index(mIndex);
+        for (auto it = mask.cbeginLeaf(); it; ++it) {
+            index.setValueOn(it->origin() >> kLeafLog2, int(origin.size()));
+            origin.push_back(it->origin());
+        }
+        around.resize(origin.size());
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, origin.size()),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            IndexAccessor acc(mIndex);
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                const Coord c = origin[k] >> kLeafLog2;
+                for (int dx = -1; dx <= 1; ++dx) {
+                    for (int dy = -1; dy <= 1; ++dy) {
+                        for (int dz = -1; dz <= 1; ++dz) {
+                            const Coord d(dx, dy, dz);
+                            around[k][aroundIndex(d)] = acc.getValue(c + d);
+                        }
+                    }
+                }
+            }
+        });
+    }
+
+    size_t size() const { return origin.size(); }
+    IndexAccessor accessor() const { return IndexAccessor(mIndex); }
+
+    /// Where around (below) holds the leaf @a d leaves away (each of d's coordinates in
+    /// -1..1).
+    static size_t aroundIndex(const Coord& d)
+    {
+        return size_t((d.x() + 1) * 9 + (d.y() + 1) * 3 + d.z() + 1);
+    }
+
+    /// The masks of @a mask's leaves at this set's leaves, in its order (none where it has no
+    /// leaf).
+    std::vector<MaskBits> masksOf(const MaskTree& mask) const
+    {
+        std::vector<MaskBits> out(origin.size());
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, origin.size()),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            openvdb::tree::ValueAccessor<const MaskTree> acc(mask);
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                const auto* leaf = acc.probeConstLeaf(origin[k]);
+                if (leaf) out[k] = leaf->getValueMask();
+            }
+        });
+        return out;
+    }
+
+    /// The index of the leaf holding the voxel @a ijk (-1: none), looked up among the
+    /// neighbours of leaf @a near where it is one of them.
+    int find(const Coord& ijk, int near, IndexAccessor& acc) const
+    {
+        const Coord c = ijk >> kLeafLog2;
+        if (near >= 0) {
+            const Coord d = c - (origin[size_t(near)] >> kLeafLog2);
+            if (std::abs(d.x()) <= 1 && std::abs(d.y()) <= 1 && std::abs(d.z()) <= 1) {
+                return around[size_t(near)][aroundIndex(d)];
+            }
+        }
+        return acc.getValue(c);
+    }
+
+    std::vector<Coord> origin;
+    /// Each leaf's 27 neighbours (itself among them), at aroundIndex(); -1: none.
+    std::vector<std::array<int, 27>> around;
+
+private:
+    IndexTree mIndex; // coarse (voxel v stands for the leaf at v * 8): each leaf's index
+};
+
 /// The seeds of a leaf's voxels and of the shell of voxels around it, as a dense array (-1
 /// where none is known), and the search of a voxel's 26 neighbours for the nearest seed.
 struct SeedNeighbourhood
@@ -277,19 +358,19 @@ struct SeedNeighbourhood
         }
     }
 
-    /// Fill from the (up to 27) leaves around: @a leafSeeds(dx, dy, dz) gives the 512 seed
-    /// indices (by offset, -1 where not known) of the leaf that many leaves away, or null where
-    /// none is known; a row along z at a time.
-    template<typename LeafSeeds>
-    void gather(LeafSeeds&& leafSeeds)
+    /// Fill from the (up to 27) leaves @a around the leaf (LeafSet::around, -1: none), whose
+    /// seed indices are @a seedOf's 512 from leaf * 512 (by offset, -1 where not known); a row
+    /// along z at a time.
+    void gather(const std::array<int, 27>& around, const int* seedOf)
     {
         std::fill(std::begin(seed), std::end(seed), -1);
         constexpr int kLast = kLeafDim - 1;
         for (int dx = -1; dx <= 1; ++dx) {
             for (int dy = -1; dy <= 1; ++dy) {
                 for (int dz = -1; dz <= 1; ++dz) {
-                    const int* from = leafSeeds(dx, dy, dz);
-                    if (!from) continue;
+                    const int leaf = around[LeafSet::aroundIndex(Coord(dx, dy, dz))];
+                    if (leaf < 0) continue;
+                    const int* from = seedOf + size_t(leaf) * LeafT::SIZE;
                     // The part of that leaf within the shell: all of it along an axis where
                     // it is the leaf itself, else its last or first slice.
                     const int x0 = dx < 0 ? kLast : 0, x1 = dx > 0 ? 0 : kLast;
@@ -340,64 +421,6 @@ float planeValue(const openvdb::Vec3d& y, const Seeds& seeds, int k, double best
     return float(sign * std::abs(d) * dx);
 }
 
-/// The leaves of a mask as one list, for arrays indexed by leaf and voxel, with each leaf's
-/// neighbours.
-class LeafSet
-{
-public:
-    using IndexTree = openvdb::Int32Tree;
-    using IndexAccessor = openvdb::tree::ValueAccessor<const IndexTree>;
-
-    explicit LeafSet(const MaskTree& mask) : mIndex(-1)
-    {
-        openvdb::tree::ValueAccessor<IndexTree> index(mIndex);
-        for (auto it = mask.cbeginLeaf(); it; ++it) {
-            index.setValueOn(it->origin() >> kLeafLog2, int(origin.size()));
-            origin.push_back(it->origin());
-        }
-        around.resize(origin.size());
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, origin.size()),
-                          [&](const tbb::blocked_range<size_t>& r) {
-            IndexAccessor acc(mIndex);
-            for (size_t k = r.begin(); k < r.end(); ++k) {
-                const Coord c = origin[k] >> kLeafLog2;
-                int j = 0;
-                for (int dx = -1; dx <= 1; ++dx) {
-                    for (int dy = -1; dy <= 1; ++dy) {
-                        for (int dz = -1; dz <= 1; ++dz) {
-                            around[k][size_t(j++)] = acc.getValue(c.offsetBy(dx, dy, dz));
-                        }
-                    }
-                }
-            }
-        });
-    }
-
-    size_t size() const { return origin.size(); }
-    IndexAccessor accessor() const { return IndexAccessor(mIndex); }
-
-    /// The index of the leaf holding the voxel @a ijk (-1: none), looked up among the
-    /// neighbours of leaf @a near where it is one of them.
-    int find(const Coord& ijk, int near, IndexAccessor& acc) const
-    {
-        const Coord c = ijk >> kLeafLog2;
-        if (near >= 0) {
-            const Coord d = c - (origin[size_t(near)] >> kLeafLog2);
-            if (std::abs(d.x()) <= 1 && std::abs(d.y()) <= 1 && std::abs(d.z()) <= 1) {
-                return around[size_t(near)][size_t((d.x() + 1) * 9 + (d.y() + 1) * 3 + d.z() + 1)];
-            }
-        }
-        return acc.getValue(c);
-    }
-
-    std::vector<Coord> origin;
-    /// Each leaf's 27 neighbours (itself at 13): (dx + 1) * 9 + (dy + 1) * 3 + dz + 1, -1: none.
-    std::vector<std::array<int, 27>> around;
-
-private:
-    IndexTree mIndex; // coarse (voxel v stands for the leaf at v * 8): each leaf's index
-};
-
 /// activeWithin()'s view of masks held by leaf of a LeafSet (@a masks), around leaf @a k: the
 /// leaves it probes, by their origins.
 class MasksAround
@@ -420,8 +443,7 @@ public:
 
     const Leaf* probeConstLeaf(const Coord& origin) const
     {
-        const Coord d = (origin - mOrigin) >> kLeafLog2; // within a leaf of k's
-        const Leaf& l = mLeaf[size_t((d.x() + 1) * 9 + (d.y() + 1) * 3 + d.z() + 1)];
+        const Leaf& l = mLeaf[LeafSet::aroundIndex((origin - mOrigin) >> kLeafLog2)];
         return l.mask ? &l : nullptr;
     }
     bool isValueOn(const Coord&) const { return false; } // no tiles
@@ -457,7 +479,7 @@ struct FlatBand
 // copied and looked up serially in part, and on the radius-400 pair at p = 1000 seeding took
 // 27 ms an input and each of three layers 13 ms.
 FlatBand extendOverLeaves(const openvdb::FloatGrid& grid, const LeafSet& leaves,
-                            std::vector<MaskBits> keep, int dilation)
+                          std::vector<MaskBits> keep, int dilation)
 {
     constexpr size_t kSize = LeafT::SIZE;
     const size_t n = leaves.size();
@@ -509,9 +531,8 @@ FlatBand extendOverLeaves(const openvdb::FloatGrid& grid, const LeafSet& leaves,
         for (size_t k = 0; k < n; ++k) {
             if ((b.keep[k] & !b.known[k]).isOff()) continue; // complete
             const auto& a = leaves.around[k];
-            if (std::any_of(a.begin(), a.end(), [&](int j) { return j >= 0 && changed[size_t(j)]; })) {
-                todo.push_back(std::uint32_t(k));
-            }
+            const auto near = [&](int j) { return j >= 0 && changed[size_t(j)]; };
+            if (std::any_of(a.begin(), a.end(), near)) todo.push_back(std::uint32_t(k));
         }
         if (todo.empty()) break;
         for (auto& f : found) f.clear();
@@ -523,7 +544,6 @@ FlatBand extendOverLeaves(const openvdb::FloatGrid& grid, const LeafSet& leaves,
             const openvdb::Vec3s* points = b.seeds.point.data();
             for (size_t t = r.begin(); t < r.end(); ++t) {
                 const size_t k = todo[t];
-                const auto& a = leaves.around[k];
                 const Coord origin = leaves.origin[k];
                 const LeafT* sign = in.probeConstLeaf(origin);
                 const float tile = sign ? 0.0f : in.getValue(origin);
@@ -532,10 +552,7 @@ FlatBand extendOverLeaves(const openvdb::FloatGrid& grid, const LeafSet& leaves,
                 const MaskBits front =
                     b.keep[k] & !b.known[k] & detail::activeWithinOf<1>(origin, known);
                 if (front.isOff()) continue;
-                nb->gather([&](int ddx, int ddy, int ddz) -> const int* {
-                    const int j = a[size_t((ddx + 1) * 9 + (ddy + 1) * 3 + ddz + 1)];
-                    return j >= 0 ? b.seedOf.get() + size_t(j) * kSize : nullptr;
-                });
+                nb->gather(leaves.around[k], b.seedOf.get());
                 for (auto it = front.beginOn(); it; ++it) {
                     const openvdb::Index m = it.pos();
                     const Coord local = LeafT::offsetToLocalCoord(m);
@@ -571,9 +588,7 @@ FlatBand extendOverLeaves(const openvdb::FloatGrid& grid, const LeafSet& leaves,
 GrownBand extendByClosestPoints(const openvdb::FloatGrid& grid, const MaskTree& keep, int dilation)
 {
     const LeafSet leaves(keep);
-    std::vector<MaskBits> bits;
-    for (auto it = keep.cbeginLeaf(); it; ++it) bits.push_back(it->getValueMask());
-    const FlatBand b = extendOverLeaves(grid, leaves, std::move(bits), dilation);
+    const FlatBand b = extendOverLeaves(grid, leaves, leaves.masksOf(keep), dilation);
     auto values = openvdb::FloatGrid::create(grid.background());
     values->setTransform(grid.transform().copy());
     values->setGridClass(openvdb::GRID_LEVEL_SET);
@@ -919,17 +934,14 @@ CreaseBands growCreaseBands(CsgOp op, const BlendPlan& plan,
     CreaseBands out;
     out.leaves = std::make_unique<LeafSet>(*keep);
     const LeafSet& leaves = *out.leaves;
-    std::vector<const MaskTree::LeafNodeType*> keepLeaves;
-    for (auto it = keep->cbeginLeaf(); it; ++it) keepLeaves.push_back(it.getLeaf());
     out.band.resize(plan.n);
     // The inputs side by side, as in growBands().
     tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
-        std::vector<MaskBits> bits(leaves.size());
+        std::vector<MaskBits> bits = leaves.masksOf(*keep);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
                           [&](const tbb::blocked_range<size_t>& r) {
             InputAccessor acc(grids[i]->tree());
             for (size_t k = r.begin(); k < r.end(); ++k) {
-                bits[k] = keepLeaves[k]->getValueMask();
                 clearBeyondDecidingSide(bits[k], leaves.origin[k], acc, termSign(op, i));
             }
         });
@@ -1550,8 +1562,7 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
     }
     // Where it does not apply: the blend's values over the region, with every band grown over
     // it, re-distanced.
-    const std::vector<GrownBand> grown =
-        growBands(m.plan, grids, *m.crease, interrupter);
+    const std::vector<GrownBand> grown = growBands(m.plan, grids, *m.crease, interrupter);
     BlendedValues blended = blendValues(op, m.plan, m.settings, grids, grown, *m.region(),
                                         finestInput(grids).transform());
     const openvdb::FloatGrid::Ptr redistanced = redistanceBlend(blended, m.plan, interrupter);
