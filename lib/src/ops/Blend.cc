@@ -12,6 +12,7 @@
 #include "../levelset/Sweeping.h"
 #include "ActiveWithin.h"
 #include "BlendDistance.h"
+#include "LeafSet.h"
 
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
@@ -95,14 +96,6 @@ MaskTree::Ptr leafMask(const TreeT& tree)
     return mask;
 }
 
-void dilateLeaves(MaskTree& mask, int steps) // steps voxels of the mask (leaves or voxels)
-{
-    if (steps <= 0) return;
-    const MaskTree::Ptr grown = levelset::dilatedBox(mask, steps);
-    mask.clear();
-    mask.merge(*grown);
-}
-
 MaskTree::Ptr dilatedCopy(const MaskTree& mask, int steps)
 {
     return levelset::dilatedBox(mask, steps);
@@ -125,8 +118,10 @@ std::vector<Coord> leafOrigins(const MaskTree& mask)
 
 int leavesFor(double voxels) { return int(std::ceil(voxels / kLeafDim)); }
 
-using MaskBits = MaskTree::LeafNodeType::NodeMaskType;
 using detail::activeWithin;
+using detail::dilatedOver;
+using detail::LeafSet;
+using detail::MaskBits;
 
 /// The band voxels' surface points c = x - phi(x) n and unit normals n (index space): the
 /// planes the extension passes on, seed k's at index k. Apart, so that the search for the
@@ -250,87 +245,6 @@ void seedVoxels(const Coord& origin, const MaskBits& voxels, InputAccessor& acc,
         seedOf[pos] = int(next++);
     }
 }
-
-/// The leaves of a mask as one list, for arrays indexed by leaf and voxel, with each leaf's
-/// neighbours.
-class LeafSet
-{
-public:
-    using IndexTree = openvdb::Int32Tree;
-    using IndexAccessor = openvdb::tree::ValueAccessor<const IndexTree>;
-
-    explicit LeafSet(const MaskTree& mask) : mIndex(-1)
-    {
-        openvdb::tree::ValueAccessor<IndexTree> index(mIndex);
-        for (auto it = mask.cbeginLeaf(); it; ++it) {
-            index.setValueOn(it->origin() >> kLeafLog2, int(origin.size()));
-            origin.push_back(it->origin());
-        }
-        around.resize(origin.size());
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, origin.size()),
-                          [&](const tbb::blocked_range<size_t>& r) {
-            IndexAccessor acc(mIndex);
-            for (size_t k = r.begin(); k < r.end(); ++k) {
-                const Coord c = origin[k] >> kLeafLog2;
-                for (int dx = -1; dx <= 1; ++dx) {
-                    for (int dy = -1; dy <= 1; ++dy) {
-                        for (int dz = -1; dz <= 1; ++dz) {
-                            const Coord d(dx, dy, dz);
-                            around[k][aroundIndex(d)] = acc.getValue(c + d);
-                        }
-                    }
-                }
-            }
-        });
-    }
-
-    size_t size() const { return origin.size(); }
-    IndexAccessor accessor() const { return IndexAccessor(mIndex); }
-
-    /// Where around (below) holds the leaf @a d leaves away (each of d's coordinates in
-    /// -1..1).
-    static size_t aroundIndex(const Coord& d)
-    {
-        return size_t((d.x() + 1) * 9 + (d.y() + 1) * 3 + d.z() + 1);
-    }
-
-    /// The masks of @a mask's leaves at this set's leaves, in its order (none where it has no
-    /// leaf).
-    std::vector<MaskBits> masksOf(const MaskTree& mask) const
-    {
-        std::vector<MaskBits> out(origin.size());
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, origin.size()),
-                          [&](const tbb::blocked_range<size_t>& r) {
-            openvdb::tree::ValueAccessor<const MaskTree> acc(mask);
-            for (size_t k = r.begin(); k < r.end(); ++k) {
-                const auto* leaf = acc.probeConstLeaf(origin[k]);
-                if (leaf) out[k] = leaf->getValueMask();
-            }
-        });
-        return out;
-    }
-
-    /// The index of the leaf holding the voxel @a ijk (-1: none), looked up among the
-    /// neighbours of leaf @a near where it is one of them.
-    int find(const Coord& ijk, int near, IndexAccessor& acc) const
-    {
-        const Coord c = ijk >> kLeafLog2;
-        if (near >= 0) {
-            const Coord d = c - (origin[size_t(near)] >> kLeafLog2);
-            if (std::abs(d.x()) <= 1 && std::abs(d.y()) <= 1 && std::abs(d.z()) <= 1) {
-                return around[size_t(near)][aroundIndex(d)];
-            }
-        }
-        return acc.getValue(c);
-    }
-
-    std::vector<Coord> origin;
-    /// Each leaf's 27 neighbours (itself among them), at aroundIndex(); -1: none.
-    std::vector<std::array<int, 27>> around;
-
-private:
-    IndexTree mIndex; // coarse (voxel v stands for the leaf at v * 8): each leaf's index
-};
 
 /// The seeds of a leaf's voxels and of the shell of voxels around it, as a dense array (-1
 /// where none is known), and the search of a voxel's 26 neighbours for the nearest seed.
@@ -704,8 +618,14 @@ struct BlendPlan
     {
         openvdb::CoordBBox box;
         mask.evalActiveVoxelBoundingBox(box);
+        return grownBytes(double(mask.activeVoxelCount()), box, d);
+    }
+
+    /// grownBytes() of @a leaves leaves within @a box (in leaves: leaf origins / 8).
+    static double grownBytes(double leaves, const openvdb::CoordBBox& box, int d)
+    {
         const double k = 2.0 * leavesFor(d) + 1.0;
-        const double byLeaves = double(mask.activeVoxelCount()) * k * k * k;
+        const double byLeaves = leaves * k * k * k;
         const openvdb::Coord dim = box.dim();
         const double byBox = (dim.x() + k - 1.0) * (dim.y() + k - 1.0) * (dim.z() + k - 1.0);
         return std::min(byLeaves, byBox) * double(LeafT::SIZE) * 16.0;
@@ -716,6 +636,16 @@ struct BlendPlan
     {
         double estimate = 0.0;
         for (size_t i = 0; i < n; ++i) estimate += grownBytes(*grownFrom[i], dilation[i]);
+        if (estimate > memoryLimit) refuse(estimate);
+    }
+
+    /// checkMemory() with every input grown from the leaves at @a origins.
+    void checkMemory(const std::vector<Coord>& origins) const
+    {
+        openvdb::CoordBBox box;
+        for (const Coord& o : origins) box.expand(o >> kLeafLog2);
+        double estimate = 0.0;
+        for (size_t i = 0; i < n; ++i) estimate += grownBytes(double(origins.size()), box, dilation[i]);
         if (estimate > memoryLimit) refuse(estimate);
     }
 };
@@ -763,31 +693,55 @@ MaskTree::Ptr pairwise(const std::vector<MaskTree::Ptr>& masks)
     return out;
 }
 
+/// The voxels in two or more of @a masks (each by leaf of one LeafSet), leaf @a k's.
+MaskBits inTwoOrMore(const std::vector<std::vector<MaskBits>>& masks, size_t k)
+{
+    MaskBits one, two;
+    for (const auto& m : masks) {
+        two |= one & m[k];
+        one |= m[k];
+    }
+    return two;
+}
+
 /// Step 2, the crease: where the blend differs from the sharp operation by more than the
 /// tolerance, two inputs are within needVox of their surfaces. First in leaves (a leaf of one
-/// input's band within reach of a leaf of another's), then in voxels within those leaves.
+/// input's band within reach of a leaf of another's: the candidates), then in voxels within
+/// those leaves: each input's band grown by its extension, on flat arrays over the leaves
+/// within the longest extension of a candidate (all that reaches a candidate's voxels).
 MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids)
 {
-    // Each input's masks by one thread: a dilation is serial, and the inputs are independent.
+    // Each input's leaf masks by one thread: a dilation is serial, and the inputs are
+    // independent.
     std::vector<MaskTree::Ptr> reach(plan.n);
     tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
         reach[i] = dilatedCopy(*plan.leaves[i], leavesFor(plan.dilation[i]));
     });
     const MaskTree::Ptr candidates = pairwise(reach);
+    const int longest = *std::max_element(plan.dilation.begin(), plan.dilation.end());
+    const LeafSet leaves(leafOrigins(*dilatedCopy(*candidates, leavesFor(longest))),
+                         LeafSet::Around::Faces);
+    std::vector<std::vector<MaskBits>> grown(plan.n);
     tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
-        // The band's voxels in the leaves that can reach a candidate, grown by the extension.
-        auto band = std::make_shared<MaskTree>();
-        openvdb::tree::ValueAccessor<const FloatTree> acc(grids[i]->tree());
-        const MaskTree::Ptr near = dilatedCopy(*candidates, leavesFor(plan.dilation[i]));
-        for (const Coord& o : leafOrigins(*near)) {
-            if (const LeafT* leaf = acc.probeConstLeaf(o)) {
-                band->touchLeaf(o)->setValueMask(leaf->getValueMask());
+        std::vector<MaskBits> band(leaves.size());
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
+                          [&](const tbb::blocked_range<size_t>& r) {
+            InputAccessor acc(grids[i]->tree());
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                if (const LeafT* leaf = acc.probeConstLeaf(leaves.origin[k])) {
+                    band[k] = leaf->getValueMask();
+                }
             }
-        }
-        dilateLeaves(*band, plan.dilation[i]);
-        reach[i] = band;
+        });
+        grown[i] = dilatedOver(leaves, std::move(band), plan.dilation[i]);
     });
-    return pairwise(reach);
+    auto crease = std::make_shared<MaskTree>();
+    openvdb::tree::ValueAccessor<MaskTree> acc(*crease);
+    for (size_t k = 0; k < leaves.size(); ++k) {
+        const MaskBits bits = inTwoOrMore(grown, k);
+        if (!bits.isOff()) acc.touchLeaf(leaves.origin[k])->setValueMask(bits);
+    }
+    return crease;
 }
 
 /// The sign of input @a i's term in union form: an intersection is the union of the
@@ -796,66 +750,6 @@ double termSign(CsgOp op, size_t i)
 {
     const double sign = op == CsgOp::Union ? 1.0 : -1.0;
     return (op == CsgOp::Difference && i > 0) ? -sign : sign;
-}
-
-/// Clear in @a bits (voxels of the leaf at @a origin) those where the input @a acc reads is
-/// beyond its band on the side that decides the blend: inactive, with its term (the value times
-/// @a side, termSign()) negative.
-void clearBeyondDecidingSide(MaskBits& bits, const Coord& origin,
-                             openvdb::tree::ValueAccessor<const FloatTree>& acc, double side)
-{
-    if (const LeafT* in = acc.probeConstLeaf(origin)) {
-        for (auto it = bits.beginOn(); it; ++it) {
-            const openvdb::Index m = it.pos();
-            if (!in->isValueOn(m) && side * double(in->getValue(m)) < 0.0) bits.setOff(m);
-        }
-    } else if (!acc.isValueOn(origin) && side * double(acc.getValue(origin)) < 0.0) {
-        bits.setOff();
-    }
-}
-
-/// The crease's voxels where the blend can differ from the sharp value, of those that
-/// localBlend() visits and the bands grow for: where no input is beyond its band on the side
-/// that decides the blend, and some input's band is within @a swellVoxels.
-///
-/// Beyond a band on the deciding side (in union form inside: the terms of a difference's
-/// subtrahends and of an intersection are negated) the deciding term is the inside background
-/// or below, and so is the blend (f <= min t), as is the sharp value. Farther than the swell
-/// from every band, every term is beyond the band on the other side by more than the swell, and
-/// so is the blend (f >= min t - swell): its value is the outside background, as the sharp
-/// one's. A step to the best of the 26 neighbours brings a distance of a voxel or more down by
-/// at least 1 voxel from a plane, and by 0.98 from a sphere of radius 3 voxels (the worst
-/// direction of 400,000), so a voxel within the band and the swell of a surface is within
-/// ceil(swell / 0.95) voxels of its band. On the radius-400 pair at p = 320 the others were a
-/// quarter of the crease's voxels (860,196 -> 636,344) and of those its bands grew by
-/// (667,448 -> 486,176 an input), and the output is the same, bit for bit.
-MaskTree::Ptr creaseToBlend(CsgOp op, const MaskTree& crease,
-                            const std::vector<openvdb::FloatGrid::Ptr>& grids, double swellVoxels)
-{
-    auto out = std::make_shared<MaskTree>(crease);
-    std::vector<MaskTree::LeafNodeType*> leaves;
-    out->getNodes(leaves);
-    const int near = int(std::ceil(swellVoxels / 0.95));
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
-                      [&](const tbb::blocked_range<size_t>& r) {
-        std::vector<openvdb::tree::ValueAccessor<const FloatTree>> acc;
-        for (const auto& g : grids) acc.emplace_back(g->tree());
-        for (size_t k = r.begin(); k < r.end(); ++k) {
-            auto& bits = leaves[k]->getValueMask();
-            const Coord o = leaves[k]->origin();
-            for (size_t i = 0; i < grids.size() && !bits.isOff(); ++i) {
-                clearBeyondDecidingSide(bits, o, acc[i], termSign(op, i));
-            }
-            if (bits.isOff()) continue;
-            // Near some band: each input's voxels within reach, until they hold all of the leaf's.
-            MaskBits nearBand;
-            for (size_t i = 0; i < grids.size() && !(bits & !nearBand).isOff(); ++i) {
-                nearBand |= activeWithin(o, acc[i], near);
-            }
-            bits &= nearBand;
-        }
-    });
-    return out;
 }
 
 /// Which voxels read the grown bands: the crease's only (localBlend()), or the whole region
@@ -886,6 +780,113 @@ int keepReach(const BlendPlan& plan, size_t i, ReadBy readers)
     return readers == ReadBy::Crease ? 1 : std::max(plan.dilation[i] + 1, plan.regionReach());
 }
 
+/// The voxels of @a leaf (an input's) beyond its band on the side that decides the blend:
+/// inactive, with its term (the value times @a side, termSign()) negative.
+MaskBits beyondOf(const LeafT& leaf, double side)
+{
+    MaskBits out;
+    const float* v = leaf.buffer().data();
+    for (openvdb::Index w = 0; w < MaskBits::WORD_COUNT; ++w) {
+        std::uint64_t negative = 0;
+        for (int b = 0; b < 64; ++b) {
+            const float x = v[64 * w + b];
+            negative |= std::uint64_t(side > 0.0 ? x < 0.0f : x > 0.0f) << b;
+        }
+        out.getWord<std::uint64_t>(w) = negative & ~leaf.getValueMask().getWord<std::uint64_t>(w);
+    }
+    return out;
+}
+
+/// Where localBlend() works, from the crease, on flat arrays over the crease's leaves and
+/// those around them:
+/// - blend: the crease's voxels where the blend can differ from the sharp value, of those that
+///   localBlend() visits and the bands grow for: where no input is beyond its band on the side
+///   that decides the blend, and some input's band is within the swell;
+/// - keep: those grown by keepReach() (a voxel), less, for each input, the voxels beyond its
+///   band on the deciding side: what its band grows over (growCreaseBands()).
+///
+/// Beyond a band on the deciding side (in union form inside: the terms of a difference's
+/// subtrahends and of an intersection are negated) the deciding term is the inside background
+/// or below, and so is the blend (f <= min t), as is the sharp value. Farther than the swell
+/// from every band, every term is beyond the band on the other side by more than the swell, and
+/// so is the blend (f >= min t - swell): its value is the outside background, as the sharp
+/// one's. A step to the best of the 26 neighbours brings a distance of a voxel or more down by
+/// at least 1 voxel from a plane, and by 0.98 from a sphere of radius 3 voxels (the worst
+/// direction of 400,000), so a voxel within the band and the swell of a surface is within
+/// ceil(swell / 0.95) voxels of its band. On the radius-400 pair at p = 320 the others were a
+/// quarter of the crease's voxels (860,196 -> 636,344) and of those its bands grew by
+/// (667,448 -> 486,176 an input), and the output is the same, bit for bit.
+struct BlendDomain
+{
+    std::vector<Coord> origin;               // the crease's leaves with voxels to blend
+    std::vector<MaskBits> blend;             // and those voxels
+    std::unique_ptr<LeafSet> leaves;         // the leaves of keep
+    std::vector<std::vector<MaskBits>> keep; // by input, by leaf of leaves
+};
+
+BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
+                        const std::vector<openvdb::FloatGrid::Ptr>& grids, const MaskTree& crease)
+{
+    const int near = std::clamp(int(std::ceil(plan.kernel.swell(plan.n) / plan.dx / 0.95)), 1,
+                                kLeafDim);
+    const int grow = keepReach(plan, 0, ReadBy::Crease);
+    // Every leaf the two dilations (near, grow: up to a leaf) read for the crease's leaves.
+    const LeafSet around(leafOrigins(*dilatedCopy(*leafMask(crease), leavesFor(grow))),
+                         LeafSet::Around::Faces);
+    const size_t count = around.size();
+    std::vector<MaskBits> blend = around.masksOf(crease);
+    std::vector<std::vector<MaskBits>> beyond(plan.n, std::vector<MaskBits>(count));
+    std::vector<MaskBits> bands(count); // every input's active voxels (an active tile's too)
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count), [&](const tbb::blocked_range<size_t>& r) {
+        std::vector<InputAccessor> acc;
+        for (const auto& g : grids) acc.emplace_back(g->tree());
+        for (size_t k = r.begin(); k < r.end(); ++k) {
+            const Coord o = around.origin[k];
+            for (size_t i = 0; i < plan.n; ++i) {
+                const double side = termSign(op, i);
+                if (const LeafT* leaf = acc[i].probeConstLeaf(o)) {
+                    bands[k] |= leaf->getValueMask();
+                    beyond[i][k] = beyondOf(*leaf, side);
+                } else if (acc[i].isValueOn(o)) {
+                    bands[k].setOn();
+                } else if (side * double(acc[i].getValue(o)) < 0.0) {
+                    beyond[i][k].setOn();
+                }
+            }
+        }
+    });
+    const std::vector<MaskBits> nearBand = dilatedOver(around, std::move(bands), near);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t k = r.begin(); k < r.end(); ++k) {
+            blend[k] &= nearBand[k];
+            for (size_t i = 0; i < plan.n; ++i) blend[k] &= !beyond[i][k];
+        }
+    });
+    const std::vector<MaskBits> keep = dilatedOver(around, blend, grow);
+    BlendDomain out;
+    std::vector<Coord> keepOrigins;
+    std::vector<size_t> from; // each keep leaf's index in around
+    for (size_t k = 0; k < count; ++k) {
+        if (!blend[k].isOff()) {
+            out.origin.push_back(around.origin[k]);
+            out.blend.push_back(blend[k]);
+        }
+        if (!keep[k].isOff()) {
+            keepOrigins.push_back(around.origin[k]);
+            from.push_back(k);
+        }
+    }
+    plan.checkMemory(keepOrigins);
+    out.leaves = std::make_unique<LeafSet>(std::move(keepOrigins));
+    out.keep.assign(plan.n, std::vector<MaskBits>(from.size()));
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size()), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t j = r.begin(); j < r.end(); ++j) {
+            for (size_t i = 0; i < plan.n; ++i) out.keep[i][j] = keep[from[j]] & !beyond[i][from[j]];
+        }
+    });
+    return out;
+}
+
 /// Step 3 where localBlend() does not apply, the grown bands: each input extended by its
 /// dilation within keepReach() of the crease (the region's reach).
 std::vector<GrownBand> growBands(const BlendPlan& plan,
@@ -913,39 +914,29 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
 }
 
 /// Step 3 where localBlend() applies, the grown bands: each input extended by its dilation over
-/// the crease grown by keepReach() (a voxel), on the flat arrays of extendOverLeaves(). Not
-/// where the input is beyond its band on the side that decides the blend (@a op's):
-/// creaseToBlend() leaves no such voxel in the crease, and the voxel nearest a point of the
-/// blended surface, where localBlend() reads planes, is not one either (the terms there are at
-/// least the blend, 0, less a rounding). They were half of the first layer, the voxel just
-/// outside the crease across the input's inner band edge.
+/// its keep (blendDomain(): the crease grown by keepReach(), a voxel), on the flat arrays of
+/// extendOverLeaves(). Not where the input is beyond its band on the side that decides the
+/// blend (@a op's): the crease's voxels to blend hold no such voxel, and the voxel nearest a
+/// point of the blended surface, where localBlend() reads planes, is not one either (the terms
+/// there are at least the blend, 0, less a rounding). They were half of the first layer, the
+/// voxel just outside the crease across the input's inner band edge.
 struct CreaseBands
 {
     std::unique_ptr<LeafSet> leaves;
     std::vector<FlatBand> band; // by input
 };
 
-CreaseBands growCreaseBands(CsgOp op, const BlendPlan& plan,
-                            const std::vector<openvdb::FloatGrid::Ptr>& grids,
-                            const MaskTree& crease, util::Interrupter* interrupter)
+CreaseBands growCreaseBands(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                            BlendDomain& domain, util::Interrupter* interrupter)
 {
-    const MaskTree::Ptr keep = dilatedCopy(crease, keepReach(plan, 0, ReadBy::Crease));
-    plan.checkMemory(std::vector<MaskTree::Ptr>(plan.n, leafMask(*keep)));
     CreaseBands out;
-    out.leaves = std::make_unique<LeafSet>(*keep);
+    out.leaves = std::move(domain.leaves);
     const LeafSet& leaves = *out.leaves;
     out.band.resize(plan.n);
     // The inputs side by side, as in growBands().
     tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
-        std::vector<MaskBits> bits = leaves.masksOf(*keep);
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()),
-                          [&](const tbb::blocked_range<size_t>& r) {
-            InputAccessor acc(grids[i]->tree());
-            for (size_t k = r.begin(); k < r.end(); ++k) {
-                clearBeyondDecidingSide(bits[k], leaves.origin[k], acc, termSign(op, i));
-            }
-        });
-        out.band[i] = extendOverLeaves(*grids[i], leaves, std::move(bits), plan.dilation[i]);
+        out.band[i] = extendOverLeaves(*grids[i], leaves, std::move(domain.keep[i]),
+                                       plan.dilation[i]);
     });
     util::checkInterrupt(interrupter);
     return out;
@@ -1179,7 +1170,7 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                                                    const BlendSettings& settings,
                                                    const std::vector<openvdb::FloatGrid::Ptr>& grids,
                                                    const CreaseBands& bands,
-                                                   const MaskTree& crease)
+                                                   const BlendDomain& domain)
 {
     const size_t n = plan.n;
     const LeafSet& leaves = *bands.leaves;
@@ -1192,13 +1183,12 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
     // Union form: an intersection is the union of the complements, a difference subtracts.
     const double sign = op == CsgOp::Union ? 1.0 : -1.0;
 
-    std::vector<const MaskTree::LeafNodeType*> in;
-    for (auto it = crease.cbeginLeaf(); it; ++it) in.push_back(it.getLeaf());
+    const size_t count = domain.origin.size();
     // The leaves with a changed voxel (most crease leaves have none: a splice for each would be
     // tens of MB of fresh pages at radius 400).
-    std::vector<std::unique_ptr<BlendSplice>> changed(in.size());
+    std::vector<std::unique_ptr<BlendSplice>> changed(count);
     std::atomic<bool> failed{false};
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, in.size()),
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count),
                       [&](const tbb::blocked_range<size_t>& r) {
         LeafTerms terms(op, grids, nullptr, clamp);
         LeafSet::IndexAccessor index = leaves.accessor();
@@ -1225,14 +1215,13 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
         };
         BlendSplice s;
         for (size_t k = r.begin(); k < r.end() && !failed; ++k) {
-            const MaskTree::LeafNodeType& mask = *in[k];
             s = BlendSplice{};
-            const Coord o = mask.origin();
+            const Coord o = domain.origin[k];
             for (int a = 0; a < 3; ++a) s.origin[a] = o[a];
             leaf = leaves.find(o, -1, index);
             terms.seek(o, bands, leaf);
             LeafT::NodeMaskType marked, active;
-            for (auto it = mask.cbeginValueOn(); it; ++it) {
+            for (auto it = domain.blend[k].beginOn(); it; ++it) {
                 const openvdb::Index m = it.pos();
                 terms.read(m);
                 // The deciding term, the next, and a third within reach: blendValues()'s rule.
@@ -1252,30 +1241,35 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                 // inside background already), so is the blend.
                 const double least = u(i1);
                 if (least - swell >= bg || least <= -bg) continue;
-                const double f = sign * plan.kernel.combine(op, terms.t.data(), n);
+                const Coord ijk = o + LeafT::offsetToLocalCoord(m);
+                Plane pa, pb;
+                const bool planes = planeAt(i1, ijk, pa) && planeAt(i2, ijk, pb);
+                const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
+                // Each term's own distance at x: what the blend is where one term weighs all.
+                const double ownA = pa.m.dot(x - pa.c), ownB = pb.m.dot(x - pb.c);
+                // The blend at x: from the planes' values there (the terms, up to a float's
+                // rounding), as the first-order estimate below takes it; from the terms where
+                // x has no planes (a voxel beyond the band needs none).
+                detail::PlaneBlendDistance e;
+                if (planes) e = detail::planeBlendEstimate(kernel, ownA, ownB, pa.m.dot(pb.m));
+                const double f = planes ? e.blend * plan.dx
+                                        : sign * plan.kernel.combine(op, terms.t.data(), n);
                 if (f >= bg) continue;
                 if (f <= -bg) {
                     marked.setOn(m);
                     s.values[m] = float(-sign) * bg;
                     continue;
                 }
-                const Coord ijk = it.getCoord();
-                Plane pa, pb;
-                if (!planeAt(i1, ijk, pa) || !planeAt(i2, ijk, pb)) {
+                if (!planes) {
                     failed = true;
                     return;
                 }
-                const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
-                // Each term's own distance at x: what the blend is where one term weighs all.
-                const double ownA = pa.m.dot(x - pa.c), ownB = pb.m.dot(x - pb.c);
                 // Start from the planes of the voxel nearest x's first-order foot point with
                 // x's planes (detail::planeBlendEstimate(): no minimization). Started from x's
                 // own planes, nearly every voxel took a second minimization (within the band
                 // each voxel is its own seed, so y's planes differ); from the predicted ones
                 // 94% (p = 1000) to 97% (p = 320) settle after one on the radius-400 pair.
                 {
-                    const detail::PlaneBlendDistance e =
-                        detail::planeBlendEstimate(kernel, ownA, ownB, pa.m.dot(pb.m));
                     const openvdb::Vec3d g = e.weight * pa.m + (1.0 - e.weight) * pb.m;
                     const double len = g.length();
                     if (e.ok && len > 1e-6) {
@@ -1551,13 +1545,12 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
     const bool closestPoints = std::all_of(m.plan.dilation.begin(), m.plan.dilation.end(),
                                            [](int d) { return d <= kMaxClosestPointLayers; });
     if (closestPoints) {
-        const MaskTree::Ptr crease =
-            creaseToBlend(op, *m.crease, grids, m.plan.kernel.swell(m.plan.n) / m.plan.dx);
+        BlendDomain domain = blendDomain(op, m.plan, grids, *m.crease);
         std::optional<std::vector<BlendSplice>> local;
         {
-            const CreaseBands bands = growCreaseBands(op, m.plan, grids, *crease, interrupter);
-            local = localBlend(op, m.plan, m.settings, grids, bands, *crease);
-        } // the bands grown for the crease freed
+            const CreaseBands bands = growCreaseBands(m.plan, grids, domain, interrupter);
+            local = localBlend(op, m.plan, m.settings, grids, bands, domain);
+        }
         if (local) return *local;
     }
     // Where it does not apply: the blend's values over the region, with every band grown over

@@ -219,6 +219,7 @@ PlaneBlendDistance planeBlendEstimate(const UnionKernel& kernel, double a, doubl
     PlaneBlendDistance out;
     out.distance = x.f / std::sqrt(std::max(x.q, 0.0));
     out.weight = x.w;
+    out.blend = x.f;
     out.ok = std::isfinite(out.distance) && x.q > 0.05;
     return out;
 }

@@ -27,6 +27,7 @@ struct PlaneBlendDistance
     double distance = 0.0; ///< signed: negative inside the blended union
     double weight = 0.5;   ///< w: the nearest point's normal is w n_a + (1 - w) n_b, normalized
     bool ok = true;        ///< false if the planes face each other too closely to tell
+    double blend = 0.0;    ///< the blend at x, U(a, b) (planeBlendEstimate() only)
 };
 
 /// @brief The signed distance from a point x to the zero set of the union blend of two planes,
