@@ -1269,13 +1269,17 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                 // own planes, nearly every voxel took a second minimization (within the band
                 // each voxel is its own seed, so y's planes differ); from the predicted ones
                 // 94% (p = 1000) to 97% (p = 320) settle after one on the radius-400 pair.
+                Coord asked = ijk; // the voxel whose planes pa and pb are (or x's, where none)
                 {
                     const openvdb::Vec3d g = e.weight * pa.m + (1.0 - e.weight) * pb.m;
                     const double len = g.length();
                     if (e.ok && len > 1e-6) {
                         const Coord at = openvdb::Coord::round(x - (e.distance / len) * g);
-                        planeAt(i1, at, pa);
-                        planeAt(i2, at, pb);
+                        if (at != asked) { // x's own planes again, where the foot is nearest x
+                            planeAt(i1, at, pa);
+                            planeAt(i2, at, pb);
+                            asked = at;
+                        }
                     }
                 }
                 double phi = 0.0, previous = 0.0, weight = -1.0, lastWeight = -1.0;
@@ -1312,11 +1316,16 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                     }
                     // The planes of the voxel nearest y (the old ones where it has none); the
                     // same planes again (often: a seed passes along its normal) give the same
-                    // distance.
+                    // distance, and the voxel asked last gives them with nothing to read.
                     const Coord at = openvdb::Coord::round(x - (phi / len) * g);
+                    if (at == asked) {
+                        settled = true;
+                        continue;
+                    }
                     const int seedA = pa.seed, seedB = pb.seed;
                     planeAt(i1, at, pa);
                     planeAt(i2, at, pb);
+                    asked = at;
                     if (pa.seed == seedA && pb.seed == seedB) settled = true;
                 }
                 // Near the middle of a valley the nearest point may be on either term's side,
