@@ -1360,6 +1360,8 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
     });
     if (failed) return std::nullopt;
     std::vector<BlendSplice> out;
+    out.reserve(size_t(std::count_if(changed.begin(), changed.end(),
+                                     [](const auto& c) { return c != nullptr; })));
     for (const auto& c : changed) {
         if (c) out.push_back(*c);
     }
@@ -1560,7 +1562,7 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
             const CreaseBands bands = growCreaseBands(m.plan, grids, domain, interrupter);
             local = localBlend(op, m.plan, m.settings, grids, bands, domain);
         }
-        if (local) return *local;
+        if (local) return std::move(*local);
     }
     // Where it does not apply: the blend's values over the region, with every band grown over
     // it, re-distanced.
