@@ -704,11 +704,36 @@ MaskBits inTwoOrMore(const std::vector<std::vector<MaskBits>>& masks, size_t k)
     return two;
 }
 
+/// findCrease()'s voxels for extensions longer than a leaf: each input's band, in the leaves
+/// within its extension of a candidate, grown into a tree by dilatedBox(), then intersected.
+/// dilatedBox() crosses several leaves in one pass, where dilatedOver() steps a leaf at a time
+/// over every leaf of its list, most of them empty that far out: with the flat passes,
+/// `ivdb blend -p 4` on spheres of radius 60 voxels (174 voxels, refused for memory once its
+/// crease is found) took 3.96 s against 2.16.
+MaskTree::Ptr creaseOnTrees(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids,
+                            const MaskTree& candidates)
+{
+    std::vector<MaskTree::Ptr> reach(plan.n);
+    tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
+        auto band = std::make_shared<MaskTree>();
+        InputAccessor acc(grids[i]->tree());
+        const MaskTree::Ptr near = dilatedCopy(candidates, leavesFor(plan.dilation[i]));
+        for (const Coord& o : leafOrigins(*near)) {
+            if (const LeafT* leaf = acc.probeConstLeaf(o)) {
+                band->touchLeaf(o)->setValueMask(leaf->getValueMask());
+            }
+        }
+        reach[i] = dilatedCopy(*band, plan.dilation[i]);
+    });
+    return pairwise(reach);
+}
+
 /// Step 2, the crease: where the blend differs from the sharp operation by more than the
 /// tolerance, two inputs are within needVox of their surfaces. First in leaves (a leaf of one
 /// input's band within reach of a leaf of another's: the candidates), then in voxels within
-/// those leaves: each input's band grown by its extension, on flat arrays over the leaves
-/// within the longest extension of a candidate (all that reaches a candidate's voxels).
+/// those leaves: each input's band grown by its extension and intersected. For extensions of
+/// up to a leaf (those of localBlend()), on flat arrays over the leaves within the longest
+/// extension of a candidate (all that reaches a candidate's voxels); for longer ones, on trees.
 MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids)
 {
     // Each input's leaf masks by one thread: a dilation is serial, and the inputs are
@@ -719,6 +744,7 @@ MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::Float
     });
     const MaskTree::Ptr candidates = pairwise(reach);
     const int longest = *std::max_element(plan.dilation.begin(), plan.dilation.end());
+    if (longest > kLeafDim) return creaseOnTrees(plan, grids, *candidates);
     const LeafSet leaves(leafOrigins(*dilatedCopy(*candidates, leavesFor(longest))),
                          LeafSet::Around::Faces);
     std::vector<std::vector<MaskBits>> grown(plan.n);
