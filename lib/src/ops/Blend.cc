@@ -118,7 +118,6 @@ std::vector<Coord> leafOrigins(const MaskTree& mask)
 
 int leavesFor(double voxels) { return int(std::ceil(voxels / kLeafDim)); }
 
-using detail::activeWithin;
 using detail::dilatedOver;
 using detail::LeafSet;
 using detail::MaskBits;
@@ -645,7 +644,9 @@ struct BlendPlan
         openvdb::CoordBBox box;
         for (const Coord& o : origins) box.expand(o >> kLeafLog2);
         double estimate = 0.0;
-        for (size_t i = 0; i < n; ++i) estimate += grownBytes(double(origins.size()), box, dilation[i]);
+        for (size_t i = 0; i < n; ++i) {
+            estimate += grownBytes(double(origins.size()), box, dilation[i]);
+        }
         if (estimate > memoryLimit) refuse(estimate);
     }
 };
@@ -710,7 +711,8 @@ MaskBits inTwoOrMore(const std::vector<std::vector<MaskBits>>& masks, size_t k)
 /// over every leaf of its list, most of them empty that far out: with the flat passes,
 /// `ivdb blend -p 4` on spheres of radius 60 voxels (174 voxels, refused for memory once its
 /// crease is found) took 3.96 s against 2.16.
-MaskTree::Ptr creaseOnTrees(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids,
+MaskTree::Ptr creaseOnTrees(const BlendPlan& plan,
+                            const std::vector<openvdb::FloatGrid::Ptr>& grids,
                             const MaskTree& candidates)
 {
     std::vector<MaskTree::Ptr> reach(plan.n);
@@ -863,7 +865,8 @@ BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
     std::vector<MaskBits> blend = around.masksOf(crease);
     std::vector<std::vector<MaskBits>> beyond(plan.n, std::vector<MaskBits>(count));
     std::vector<MaskBits> bands(count); // every input's active voxels (an active tile's too)
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, count), [&](const tbb::blocked_range<size_t>& r) {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count),
+                      [&](const tbb::blocked_range<size_t>& r) {
         std::vector<InputAccessor> acc;
         for (const auto& g : grids) acc.emplace_back(g->tree());
         for (size_t k = r.begin(); k < r.end(); ++k) {
@@ -882,7 +885,8 @@ BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
         }
     });
     const std::vector<MaskBits> nearBand = dilatedOver(around, std::move(bands), near);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, count), [&](const tbb::blocked_range<size_t>& r) {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, count),
+                      [&](const tbb::blocked_range<size_t>& r) {
         for (size_t k = r.begin(); k < r.end(); ++k) {
             blend[k] &= nearBand[k];
             for (size_t i = 0; i < plan.n; ++i) blend[k] &= !beyond[i][k];
@@ -905,9 +909,12 @@ BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
     plan.checkMemory(keepOrigins);
     out.leaves = std::make_unique<LeafSet>(std::move(keepOrigins));
     out.keep.assign(plan.n, std::vector<MaskBits>(from.size()));
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size()), [&](const tbb::blocked_range<size_t>& r) {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size()),
+                      [&](const tbb::blocked_range<size_t>& r) {
         for (size_t j = r.begin(); j < r.end(); ++j) {
-            for (size_t i = 0; i < plan.n; ++i) out.keep[i][j] = keep[from[j]] & !beyond[i][from[j]];
+            for (size_t i = 0; i < plan.n; ++i) {
+                out.keep[i][j] = keep[from[j]] & !beyond[i][from[j]];
+            }
         }
     });
     return out;
@@ -952,7 +959,8 @@ struct CreaseBands
     std::vector<FlatBand> band; // by input
 };
 
-CreaseBands growCreaseBands(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids,
+CreaseBands growCreaseBands(const BlendPlan& plan,
+                            const std::vector<openvdb::FloatGrid::Ptr>& grids,
                             BlendDomain& domain, util::Interrupter* interrupter)
 {
     CreaseBands out;
@@ -1587,7 +1595,7 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
         {
             const CreaseBands bands = growCreaseBands(m.plan, grids, domain, interrupter);
             local = localBlend(op, m.plan, m.settings, grids, bands, domain);
-        }
+        } // the bands grown for the crease freed
         if (local) return std::move(*local);
     }
     // Where it does not apply: the blend's values over the region, with every band grown over
