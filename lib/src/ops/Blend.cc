@@ -1316,12 +1316,16 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                         }
                     }
                 }
+                // The first minimization starts where x's estimate puts the foot point's weight
+                // (detail::PlaneBlendDistance::start; the planes there are near x's), the others
+                // where the last ended.
+                double start = e.start;
                 double phi = 0.0, previous = 0.0, weight = -1.0, lastWeight = -1.0;
                 double seen[kMaxSteps], seenWeight[kMaxSteps]; // each step's distance, weight
                 bool settled = false, cycle = false;
                 for (int iter = 0; iter < kMaxSteps && !settled; ++iter) {
                     const detail::PlaneBlendDistance d = detail::planeBlendDistance(
-                        kernel, pa.m.dot(x - pa.c), pb.m.dot(x - pb.c), pa.m.dot(pb.m), weight);
+                        kernel, pa.m.dot(x - pa.c), pb.m.dot(x - pb.c), pa.m.dot(pb.m), start);
                     if (!d.ok) {
                         failed = true;
                         return;
@@ -1340,6 +1344,7 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                     phi = d.distance;
                     lastWeight = weight;
                     weight = d.weight;
+                    start = d.start;
                     seen[iter] = phi;
                     seenWeight[iter] = weight;
                     const openvdb::Vec3d g = d.weight * pa.m + (1.0 - d.weight) * pb.m;

@@ -182,32 +182,36 @@ AtX blendAtX(const UnionKernel& kernel, double a, double b, double c)
     return x;
 }
 
-/// Where the iteration starts: the kernel's weight at the first-order foot point of x,
-/// x - f g / q. That point changes b - a by -f (1 - c) (1 - 2 w) / q. The least h is attained
-/// at the weight of the true foot point (the tangent plane there), so this is near it. On the
-/// radius-400 pair it took the iteration's evaluations of h from 1.27 M to 0.77 M (p = 1000)
-/// and from 2.08 M to 1.51 M (p = 320) against x's own weight, for the same distances.
-double startAtFoot(const UnionKernel& kernel, double a, double b, double c)
+/// Where the iteration starts: the kernel's weight at the first-order foot point of x (@a x
+/// the blend there), x - f g / q. That point changes b - a by -f (1 - c) (1 - 2 w) / q. The
+/// least h is attained at the weight of the true foot point (the tangent plane there), so this
+/// is near it. On the radius-400 pair it took the iteration's evaluations of h from 1.27 M to
+/// 0.77 M (p = 1000) and from 2.08 M to 1.51 M (p = 320) against x's own weight, for the same
+/// distances.
+double startAtFoot(const UnionKernel& kernel, const AtX& x, double a, double b, double c)
 {
-    const AtX x = blendAtX(kernel, a, b, c);
     if (!(x.q > 0.05)) return x.t; // planes facing each other: no first-order foot point
     const double cc = std::max(-1.0, std::min(1.0, c));
     return kernelWeight(kernel, (b - a) - x.f * (1.0 - cc) * (1.0 - 2.0 * x.w) / x.q);
 }
 
 /// The answer from sample @a s of h: the distance, its weight, whether the planes could tell.
-PlaneBlendDistance answer(const Sample& s, double a, double b)
+PlaneBlendDistance answer(const UnionKernel& kernel, const Sample& s, double a, double b)
 {
     PlaneBlendDistance out;
     out.distance = s.h;
     out.weight = s.w;
+    out.start = s.t;
     // Planes facing each other (c near -1) leave Q near 0 where both weigh alike: the
     // linearization says nothing there.
     out.ok = std::isfinite(s.h) && s.q > 0.05;
     // The ends are tangent planes too (the smooth minimum's flat parts; the super-elliptic
     // blend's asymptotes): a descent that stopped in another valley is not the least.
-    if (a < out.distance) out.distance = a, out.weight = 1.0;
-    if (b < out.distance) out.distance = b, out.weight = 0.0;
+    const double ends = kernel.polynomial ? 1.0 : kTMax; // a's end; b's is 1 - it, or -it
+    if (a < out.distance) out.distance = a, out.weight = 1.0, out.start = ends;
+    if (b < out.distance) {
+        out.distance = b, out.weight = 0.0, out.start = kernel.polynomial ? 0.0 : -ends;
+    }
     return out;
 }
 
@@ -220,6 +224,7 @@ PlaneBlendDistance planeBlendEstimate(const UnionKernel& kernel, double a, doubl
     out.distance = x.f / std::sqrt(std::max(x.q, 0.0));
     out.weight = x.w;
     out.blend = x.f;
+    out.start = startAtFoot(kernel, x, a, b, c);
     out.ok = std::isfinite(out.distance) && x.q > 0.05;
     return out;
 }
@@ -229,11 +234,9 @@ PlaneBlendDistance planeBlendDistance(const UnionKernel& kernel, double a, doubl
 {
     const SupportDistance support(kernel, a, b, c);
     // Start at @a start, else at the kernel's weight at x's first-order foot point.
-    const bool given = start >= 0.0 && start <= 1.0;
-    const double t0 = !given           ? startAtFoot(kernel, a, b, c)
-                    : kernel.polynomial ? start
-                    : std::log(std::max(start, 1e-300) / std::max(1.0 - start, 1e-300));
-    return answer(support.minimize(t0), a, b);
+    const double t0 = std::isnan(start) ? startAtFoot(kernel, blendAtX(kernel, a, b, c), a, b, c)
+                                        : start;
+    return answer(kernel, support.minimize(t0), a, b);
 }
 
 } // namespace ivdb::ops::detail

@@ -8,6 +8,8 @@
 
 #include <ivdb/implicit/Blend.h>
 
+#include <limits>
+
 namespace ivdb::ops::detail {
 
 /// @brief A union blend's kernel in the units of the distances it takes (voxels).
@@ -28,6 +30,10 @@ struct PlaneBlendDistance
     double weight = 0.5;   ///< w: the nearest point's normal is w n_a + (1 - w) n_b, normalized
     bool ok = true;        ///< false if the planes face each other too closely to tell
     double blend = 0.0;    ///< the blend at x, U(a, b) (planeBlendEstimate() only)
+    /// The iteration's variable (logit w for the super-elliptic blend, w for the smooth
+    /// minimum) at the least; planeBlendEstimate(): at x's first-order foot point, where
+    /// planeBlendDistance() starts by default.
+    double start = 0.0;
 };
 
 /// @brief The signed distance from a point x to the zero set of the union blend of two planes,
@@ -43,16 +49,18 @@ struct PlaneBlendDistance
 /// from x, where S(w) is the kernel's support term: H(w)/p for the super-elliptic blend (H the
 /// entropy -w ln w - (1 - w) ln(1 - w)) and k w (1 - w) for the smooth minimum. The distance is
 /// the least h over w in [0, 1], found by a safeguarded Newton iteration (on logit w for the
-/// super-elliptic blend, whose minimum is always inside (0, 1)), from the weight @a start if it
-/// is in [0, 1] (a previous answer's), else from the kernel's weight at x's first-order foot
-/// point (x - f g / |g|^2, f the blend at x and g its gradient), which is near the least.
+/// super-elliptic blend, whose minimum is always inside (0, 1)), from @a start (the iteration's
+/// variable: a previous answer's, or planeBlendEstimate()'s for nearby planes) if it is given
+/// (not NaN), else from the kernel's weight at x's first-order foot point (x - f g / |g|^2, f
+/// the blend at x and g its gradient), which is near the least.
 PlaneBlendDistance planeBlendDistance(const UnionKernel& kernel, double a, double b, double c,
-                                      double start = -1.0);
+                                      double start = std::numeric_limits<double>::quiet_NaN());
 
 /// @brief The first-order estimate of planeBlendDistance(): the blend f at x over the length of
 /// its gradient g = w n_a + (1 - w) n_b, and w, so that x - (distance / |g|) g is x's
-/// first-order foot point. No minimization (one exponential and one logarithm): enough to say
-/// near which voxel the nearest point lies.
+/// first-order foot point, and the kernel's weight there as planeBlendDistance()'s start. No
+/// minimization (one exponential and one logarithm): enough to say near which voxel the nearest
+/// point lies.
 PlaneBlendDistance planeBlendEstimate(const UnionKernel& kernel, double a, double b, double c);
 
 } // namespace ivdb::ops::detail
