@@ -780,32 +780,15 @@ double termSign(CsgOp op, size_t i)
     return (op == CsgOp::Difference && i > 0) ? -sign : sign;
 }
 
-/// Which voxels read the grown bands: the crease's only (localBlend()), or the whole region
-/// (the fast-sweeping re-distancing, which reads the surface there).
-enum class ReadBy { Crease, Region };
-
-/// How far around the crease input @a i's band grows.
-///
-/// For the crease's own voxels (localBlend()): one voxel, for the planes it reads just outside.
-/// A crease voxel then takes its seed along paths within the crease. Where the blend reads
-/// planes, both terms are within a few voxels of their surfaces, and a path towards one surface
-/// mostly stays near the other, within the crease. Where a path would leave it, the voxel takes
-/// the nearest seed its neighbours within the crease offer: a tangent plane of the same
-/// surface, a voxel or so from the unbounded extension's.
-///
-/// Growing within the extension's length of the crease instead (as the region does, below)
-/// guarantees the unbounded extension's seed, but grew 1.7x as many voxels. The two differ by
-/// under 0.001 voxel on the radius-400 pair (at about 1,400 voxels at p = 320, none at
-/// p = 1000), with the same error against the exact blended surface
-/// (scripts/blend_accuracy.py), and by up to 0.04 voxel on inputs curved within a few voxels.
-///
-/// For the region (the fast-sweeping re-distancing, which reads values over all of it): a
-/// crease voxel at layer L (its 26-connected distance from the band, at most the dilation d)
-/// takes its seed along a path within L of it, so d + 1 voxels give every crease voxel the
-/// unbounded extension's value; further where the region is wider than that.
-int keepReach(const BlendPlan& plan, size_t i, ReadBy readers)
+/// How far around the crease input @a i's band grows where the fast-sweeping re-distancing
+/// reads values (over the whole region): a crease voxel at layer L (its 26-connected distance
+/// from the band, at most the dilation d) takes its seed along a path within L of it, so d + 1
+/// voxels give every crease voxel the unbounded extension's value; further where the region is
+/// wider than that. (Where localBlend() applies, the bands grow over its voxels alone:
+/// blendDomain().)
+int keepReach(const BlendPlan& plan, size_t i)
 {
-    return readers == ReadBy::Crease ? 1 : std::max(plan.dilation[i] + 1, plan.regionReach());
+    return std::max(plan.dilation[i] + 1, plan.regionReach());
 }
 
 /// The voxels of @a leaf (an input's) beyond its band on the side that decides the blend:
@@ -826,12 +809,10 @@ MaskBits beyondOf(const LeafT& leaf, double side)
 }
 
 /// Where localBlend() works, from the crease, on flat arrays over the crease's leaves and
-/// those around them:
-/// - blend: the crease's voxels where the blend can differ from the sharp value, of those that
-///   localBlend() visits and the bands grow for: where no input is beyond its band on the side
-///   that decides the blend, and some input's band is within the swell;
-/// - keep: those grown by keepReach() (a voxel), less, for each input, the voxels beyond its
-///   band on the deciding side: what its band grows over (growCreaseBands()).
+/// those around them: the crease's voxels where the blend can differ from the sharp value,
+/// those that localBlend() visits and every band grows over (growCreaseBands()): where no input
+/// is beyond its band on the side that decides the blend, and some input's band is within the
+/// swell.
 ///
 /// Beyond a band on the deciding side (in union form inside: the terms of a difference's
 /// subtrahends and of an intersection are negated) the deciding term is the inside background
@@ -842,14 +823,32 @@ MaskBits beyondOf(const LeafT& leaf, double side)
 /// at least 1 voxel from a plane, and by 0.98 from a sphere of radius 3 voxels (the worst
 /// direction of 400,000), so a voxel within the band and the swell of a surface is within
 /// ceil(swell / 0.95) voxels of its band. On the radius-400 pair at p = 320 the others were a
-/// quarter of the crease's voxels (860,196 -> 636,344) and of those its bands grew by
-/// (667,448 -> 486,176 an input), and the output is the same, bit for bit.
+/// quarter of the crease's voxels (860,196 -> 636,344), and the output is the same, bit for
+/// bit.
+///
+/// The bands grow over those voxels alone: localBlend() reads planes at the voxels it blends
+/// and at the voxels nearest their foot points, on the blended surface, where both terms are
+/// within a few voxels of their surfaces, well inside the crease. A voxel to blend takes its
+/// seed along paths within them; where a path would leave them, the nearest seed its
+/// neighbours there offer: a tangent plane of the same surface, a voxel or so from the
+/// unbounded extension's. A foot point's voxel outside them (rare) leaves the planes asked last.
+///
+/// Growing them by a voxel more (for the planes just outside) grew 1.5x as many voxels (557,104
+/// against 376,632 an input on the radius-400 pair at p = 1000) for 10% (p = 1000) to 13%
+/// (p = 320) more of the blend's compute. The two differ by under 0.003 voxel there, with the same
+/// error against the exact blended surface (scripts/blend_accuracy.py), and on spheres of
+/// radius 10 voxels by up to 0.019 voxel at about one voxel in a hundred near the crease, none
+/// of them worse by more than 0.001 voxel against the exact blended surface and 32 to 88 better
+/// (the largest error the same). Growing within the extension's length of the crease (as the
+/// region does) guarantees the unbounded extension's seed, with 1.7x as many voxels again; it
+/// differed from a voxel's growth by under 0.001 voxel on the radius-400 pair and by up to 0.04
+/// voxel on inputs curved within a few voxels.
 struct BlendDomain
 {
     std::vector<Coord> origin;               // the crease's leaves with voxels to blend
     std::vector<MaskBits> blend;             // and those voxels
-    std::unique_ptr<LeafSet> leaves;         // the leaves of keep
-    std::vector<std::vector<MaskBits>> keep; // by input, by leaf of leaves
+    std::unique_ptr<LeafSet> leaves;         // the leaves of origin
+    std::vector<std::vector<MaskBits>> keep; // what each band grows over: blend, by input
 };
 
 BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
@@ -857,9 +856,8 @@ BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
 {
     const int near = std::clamp(int(std::ceil(plan.kernel.swell(plan.n) / plan.dx / 0.95)), 1,
                                 kLeafDim);
-    const int grow = keepReach(plan, 0, ReadBy::Crease);
-    // Every leaf the two dilations (near, grow: up to a leaf) read for the crease's leaves.
-    const LeafSet around(leafOrigins(*dilatedCopy(*leafMask(crease), leavesFor(grow))),
+    // Every leaf the dilation by near (up to a leaf) reads for the crease's leaves.
+    const LeafSet around(leafOrigins(*dilatedCopy(*leafMask(crease), leavesFor(near))),
                          LeafSet::Around::Faces);
     const size_t count = around.size();
     std::vector<MaskBits> blend = around.masksOf(crease);
@@ -892,36 +890,21 @@ BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
             for (size_t i = 0; i < plan.n; ++i) blend[k] &= !beyond[i][k];
         }
     });
-    const std::vector<MaskBits> keep = dilatedOver(around, blend, grow);
     BlendDomain out;
-    std::vector<Coord> keepOrigins;
-    std::vector<size_t> from; // each keep leaf's index in around
     for (size_t k = 0; k < count; ++k) {
-        if (!blend[k].isOff()) {
-            out.origin.push_back(around.origin[k]);
-            out.blend.push_back(blend[k]);
-        }
-        if (!keep[k].isOff()) {
-            keepOrigins.push_back(around.origin[k]);
-            from.push_back(k);
-        }
+        if (blend[k].isOff()) continue;
+        out.origin.push_back(around.origin[k]);
+        out.blend.push_back(blend[k]);
     }
-    plan.checkMemory(keepOrigins);
-    out.leaves = std::make_unique<LeafSet>(std::move(keepOrigins));
-    out.keep.assign(plan.n, std::vector<MaskBits>(from.size()));
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size()),
-                      [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t j = r.begin(); j < r.end(); ++j) {
-            for (size_t i = 0; i < plan.n; ++i) {
-                out.keep[i][j] = keep[from[j]] & !beyond[i][from[j]];
-            }
-        }
-    });
+    plan.checkMemory(out.origin);
+    // Each band grows over the voxels to blend, which no input is beyond.
+    out.leaves = std::make_unique<LeafSet>(out.origin);
+    out.keep.assign(plan.n, out.blend);
     return out;
 }
 
 /// Step 3 where localBlend() does not apply, the grown bands: each input extended by its
-/// dilation within keepReach() of the crease (the region's reach).
+/// dilation within keepReach() of the crease.
 std::vector<GrownBand> growBands(const BlendPlan& plan,
                                  const std::vector<openvdb::FloatGrid::Ptr>& grids,
                                  const MaskTree& crease, util::Interrupter* interrupter)
@@ -929,7 +912,7 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
     std::map<int, MaskTree::Ptr> byReach; // the inputs' reaches are often the same
     std::vector<MaskTree::Ptr> keep(plan.n), keepLeaves(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
-        const int reach = keepReach(plan, i, ReadBy::Region);
+        const int reach = keepReach(plan, i);
         MaskTree::Ptr& k = byReach[reach];
         if (!k) k = dilatedCopy(crease, reach);
         keep[i] = k;
@@ -947,12 +930,7 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
 }
 
 /// Step 3 where localBlend() applies, the grown bands: each input extended by its dilation over
-/// its keep (blendDomain(): the crease grown by keepReach(), a voxel), on the flat arrays of
-/// extendOverLeaves(). Not where the input is beyond its band on the side that decides the
-/// blend (@a op's): the crease's voxels to blend hold no such voxel, and the voxel nearest a
-/// point of the blended surface, where localBlend() reads planes, is not one either (the terms
-/// there are at least the blend, 0, less a rounding). They were half of the first layer, the
-/// voxel just outside the crease across the input's inner band edge.
+/// the voxels to blend (blendDomain()), on the flat arrays of extendOverLeaves().
 struct CreaseBands
 {
     std::unique_ptr<LeafSet> leaves;
@@ -1498,7 +1476,7 @@ std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& cre
 /// or the extension's length beyond for fast sweeping.
 int readReach(const BlendPlan& plan, size_t i)
 {
-    const int keep = keepReach(plan, i, ReadBy::Region);
+    const int keep = keepReach(plan, i);
     return keep + plan.dilation[i] + 2;
 }
 
