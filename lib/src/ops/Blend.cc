@@ -866,12 +866,12 @@ MaskBits beyondOf(const LeafT& leaf, double side)
 /// unbounded extension's. A foot point's voxel outside them (rare) leaves the planes asked last.
 ///
 /// Growing them by a voxel more (for the planes just outside) grew 1.5x as many voxels (557,104
-/// against 376,632 an input on the radius-400 pair at p = 1000) for 10% (p = 1000) to 13%
+/// against 376,632 an input on the radius-400 pair at p = 1000) for 10% (p = 1000) to 16%
 /// (p = 320) more of the blend's compute. The two differ by under 0.003 voxel there, with the same
 /// error against the exact blended surface (scripts/blend_accuracy.py), and on spheres of
-/// radius 10 voxels by up to 0.019 voxel at about one voxel in a hundred near the crease, none
-/// of them worse by more than 0.001 voxel against the exact blended surface and 32 to 88 better
-/// (the largest error the same). Growing within the extension's length of the crease (as the
+/// radius 10 voxels by up to 0.023 voxel at up to three voxels in a hundred near the crease,
+/// none of them farther from the exact blended surface by more than 0.001 voxel and 32 to 88
+/// nearer (the largest error the same). Growing within the extension's length of the crease (as the
 /// region does) guarantees the unbounded extension's seed, with 1.7x as many voxels again; it
 /// differed from a voxel's growth by under 0.001 voxel on the radius-400 pair and by up to 0.04
 /// voxel on inputs curved within a few voxels.
