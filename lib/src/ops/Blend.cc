@@ -880,7 +880,6 @@ struct BlendDomain
     std::vector<Coord> origin;               // the crease's leaves with voxels to blend
     std::vector<MaskBits> blend;             // and those voxels
     std::unique_ptr<LeafSet> leaves;         // the leaves of origin
-    std::vector<std::vector<MaskBits>> keep; // what each band grows over: blend, by input
 };
 
 BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
@@ -920,9 +919,7 @@ BlendDomain blendDomain(CsgOp op, const BlendPlan& plan,
         out.blend.push_back(blend[k]);
     }
     plan.checkMemory(out.origin);
-    // Each band grows over the voxels to blend, which no input is beyond.
     out.leaves = std::make_unique<LeafSet>(out.origin);
-    out.keep.assign(plan.n, out.blend);
     return out;
 }
 
@@ -970,8 +967,8 @@ CreaseBands growCreaseBands(const BlendPlan& plan,
     out.band.resize(plan.n);
     // The inputs side by side, as in growBands().
     tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
-        out.band[i] = extendOverLeaves(*grids[i], leaves, std::move(domain.keep[i]),
-                                       plan.dilation[i]);
+        // Over the voxels to blend, which no input is beyond.
+        out.band[i] = extendOverLeaves(*grids[i], leaves, domain.blend, plan.dilation[i]);
     });
     util::checkInterrupt(interrupter);
     return out;

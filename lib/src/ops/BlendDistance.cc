@@ -207,11 +207,9 @@ PlaneBlendDistance answer(const UnionKernel& kernel, const Sample& s, double a, 
     out.ok = std::isfinite(s.h) && s.q > 0.05;
     // The ends are tangent planes too (the smooth minimum's flat parts; the super-elliptic
     // blend's asymptotes): a descent that stopped in another valley is not the least.
-    const double ends = kernel.polynomial ? 1.0 : kTMax; // a's end; b's is 1 - it, or -it
-    if (a < out.distance) out.distance = a, out.weight = 1.0, out.start = ends;
-    if (b < out.distance) {
-        out.distance = b, out.weight = 0.0, out.start = kernel.polynomial ? 0.0 : -ends;
-    }
+    const double aEnd = kernel.polynomial ? 1.0 : kTMax, bEnd = kernel.polynomial ? 0.0 : -kTMax;
+    if (a < out.distance) out.distance = a, out.weight = 1.0, out.start = aEnd;
+    if (b < out.distance) out.distance = b, out.weight = 0.0, out.start = bEnd;
     return out;
 }
 
