@@ -84,3 +84,25 @@ TEST(TestDilate, OneVoxelBecomesTheCube)
     }
     EXPECT_EQ(levelset::dilatedBox(openvdb::MaskTree(), 5)->activeVoxelCount(), 0u);
 }
+
+// The SmallMaskTree overload (coarse masks: a voxel per leaf) grows the same voxels.
+TEST(TestDilate, SmallMaskTreeEqualsOpenVdbsDilation)
+{
+    for (unsigned seed : {3u, 4u}) {
+        const openvdb::MaskTree mask = randomMask(seed);
+        levelset::SmallMaskTree small; // the same voxels (the tile's among them)
+        for (auto it = mask.cbeginValueOn(); it; ++it) small.sparseFill(it.getBoundingBox(), true);
+        for (int voxels : {0, 1, 2, 7, 8, 9, 17}) {
+            const auto ours = levelset::dilatedBox(small, voxels);
+            openvdb::MaskTree oursAsMask;
+            for (auto it = ours->cbeginValueOn(); it; ++it) oursAsMask.setValueOn(it.getCoord());
+            const auto theirs = openVdbDilation(mask, voxels);
+            EXPECT_GT(ours->activeVoxelCount(), mask.activeVoxelCount() / 2);
+            EXPECT_EQ(ours->activeVoxelCount(), theirs->activeVoxelCount())
+                << "seed " << seed << ", " << voxels << " voxels";
+            EXPECT_EQ(missing(oursAsMask, *theirs), 0u) << "seed " << seed << ", " << voxels;
+            EXPECT_EQ(missing(*theirs, oursAsMask), 0u) << "seed " << seed << ", " << voxels;
+            EXPECT_FALSE(ours->hasActiveTiles());
+        }
+    }
+}

@@ -301,6 +301,25 @@ void BM_DilateBox(benchmark::State& state)
     }
 }
 
+// The mask of the leaves of one sphere of the pair (radius 400 voxels: a voxel a leaf, as the
+// grid blend finds its candidate leaves) grown by one leaf, on a MaskTree (range(0) = 0) and on
+// a levelset::SmallMaskTree (1).
+template<typename TreeT>
+void dilateLeafMask(benchmark::State& state)
+{
+    const openvdb::FloatGrid::Ptr sphere = benchPair(400).first;
+    TreeT mask;
+    for (auto leaf = sphere->tree().cbeginLeaf(); leaf; ++leaf) mask.setValueOn(leaf->origin() >> 3);
+    for (auto _ : state) benchmark::DoNotOptimize(levelset::dilatedBox(mask, 1).get());
+    state.counters["leaves"] = double(mask.activeVoxelCount());
+}
+
+void BM_DilateLeafMask(benchmark::State& state)
+{
+    if (state.range(0) == 0) dilateLeafMask<openvdb::MaskTree>(state);
+    else dilateLeafMask<levelset::SmallMaskTree>(state);
+}
+
 void BM_OpenVDB_Dilate(benchmark::State& state)
 {
     const openvdb::MaskTree mask = benchBandMask();
@@ -319,6 +338,7 @@ BENCHMARK(BM_CsgUnion)->Arg(100)->Arg(200)->Arg(400)->Unit(benchmark::kMilliseco
 BENCHMARK(BM_OpenVDB_CsgUnion)->Arg(100)->Arg(200)->Arg(400)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_DilateBox)->Arg(3)->Arg(10)->Arg(30)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_OpenVDB_Dilate)->Arg(3)->Arg(10)->Arg(30)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_DilateLeafMask)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_BlendUnion)->Args({100, 1000})->Args({200, 1000})->Args({400, 1000})->Args({100, 80})
     ->Args({200, 160})->Args({400, 320})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_BlendOverSharp)->Args({400, 1000})->Args({400, 320})->Unit(benchmark::kMillisecond)

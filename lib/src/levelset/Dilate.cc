@@ -53,10 +53,11 @@ Words orOf(const Words& a, const Words& b)
 /// @a axis. A voxel at local c of a leaf reaches local c' of the leaf k leaves over when
 /// |8k + c' - c| <= d; with t = c' - c in -7..7, the words of leaf k are the OR of the leaf
 /// shifted by each t in [-d - 8k, d - 8k]: a prefix or suffix of the 15 shifts, or all of them.
-MaskTree::Ptr dilateAxis(const MaskTree& in, int axis, int d)
+template<typename TreeT>
+typename TreeT::Ptr dilateAxis(const TreeT& in, int axis, int d)
 {
-    auto out = std::make_shared<MaskTree>();
-    openvdb::tree::ValueAccessor<MaskTree> acc(*out);
+    auto out = std::make_shared<TreeT>();
+    openvdb::tree::ValueAccessor<TreeT> acc(*out);
     constexpr int kShifts = 2 * kDim - 1; // t = -7..7 at index t + 7
     std::array<Words, kShifts> shifts, prefix, suffix; // each shift; OR up to t; OR from t
     const int kLow = -((d + kDim - 1) / kDim), kHigh = (d + kDim - 1) / kDim;
@@ -95,15 +96,26 @@ MaskTree::Ptr dilateAxis(const MaskTree& in, int axis, int d)
     return out;
 }
 
-} // namespace
-
-openvdb::MaskTree::Ptr dilatedBox(const openvdb::MaskTree& mask, int voxels)
+template<typename TreeT>
+typename TreeT::Ptr dilatedBoxOf(const TreeT& mask, int voxels)
 {
-    auto out = std::make_shared<MaskTree>(mask);
+    auto out = std::make_shared<TreeT>(mask);
     out->voxelizeActiveTiles();
     if (voxels <= 0) return out;
     for (int axis = 0; axis < 3; ++axis) out = dilateAxis(*out, axis, voxels);
     return out;
+}
+
+} // namespace
+
+openvdb::MaskTree::Ptr dilatedBox(const openvdb::MaskTree& mask, int voxels)
+{
+    return dilatedBoxOf(mask, voxels);
+}
+
+SmallMaskTree::Ptr dilatedBox(const SmallMaskTree& mask, int voxels)
+{
+    return dilatedBoxOf(mask, voxels);
 }
 
 } // namespace ivdb::levelset

@@ -28,6 +28,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <numeric>
 #include <optional>
 #include <cmath>
@@ -41,6 +42,7 @@ namespace {
 using FloatTree = openvdb::FloatTree;
 using LeafT = FloatTree::LeafNodeType;
 using MaskTree = openvdb::MaskTree;
+using levelset::SmallMaskTree;
 using openvdb::Coord;
 
 constexpr int kLeafLog2 = LeafT::LOG2DIM;
@@ -49,17 +51,20 @@ constexpr int kLeafDim = LeafT::DIM;
 // Leaf nodes as the voxels of a coarse mask: voxel v stands for the leaf at origin v * 8. The
 // blend's regions are decided on this mask, which is 512 times smaller than the band. Read from
 // the child masks of the nodes above the leaves (16^3 children each, bit (x << 8) | (y << 4) | z),
-// eight rows of eight bits at a time, instead of a voxel set per leaf.
+// eight rows of eight bits at a time, instead of a voxel set per leaf. On a SmallMaskTree: a
+// MaskTree clears a 256 KB table for each top node, eight of them for masks around the origin,
+// and grew the coarse mask of one sphere of the radius-400 pair about twice as slowly
+// (BM_DilateLeafMask).
 template<typename TreeT>
-MaskTree::Ptr leafMask(const TreeT& tree)
+SmallMaskTree::Ptr leafMask(const TreeT& tree)
 {
     using Parent = typename TreeT::RootNodeType::ChildNodeType::ChildNodeType;
     static_assert(Parent::LOG2DIM == 4 && kLeafDim == 8,
                   "16^3 leaves under a node, 8^3 in a mask leaf");
     std::vector<const Parent*> parents;
     tree.getNodes(parents);
-    auto mask = std::make_shared<MaskTree>();
-    openvdb::tree::ValueAccessor<MaskTree> acc(*mask);
+    auto mask = std::make_shared<SmallMaskTree>();
+    openvdb::tree::ValueAccessor<SmallMaskTree> acc(*mask);
     for (const Parent* node : parents) {
         const Coord base = node->origin() >> kLeafLog2; // in leaves: a multiple of 16
         const auto& children = node->getChildMask();
@@ -96,12 +101,14 @@ MaskTree::Ptr leafMask(const TreeT& tree)
     return mask;
 }
 
-MaskTree::Ptr dilatedCopy(const MaskTree& mask, int steps)
+template<typename TreeT>
+typename TreeT::Ptr dilatedCopy(const TreeT& mask, int steps)
 {
     return levelset::dilatedBox(mask, steps);
 }
 
-std::vector<Coord> leafOrigins(const MaskTree& mask)
+/// The origins of the leaves a coarse mask (leafMask()) stands for.
+std::vector<Coord> leafOrigins(const SmallMaskTree& mask)
 {
     std::vector<Coord> out;
     out.reserve(size_t(mask.activeVoxelCount()));
@@ -273,17 +280,32 @@ struct SeedNeighbourhood
 
     /// Fill from the (up to 27) leaves @a around the leaf (LeafSet::around, -1: none), whose
     /// seed indices are @a seedOf's 512 from leaf * 512 (by offset, -1 where not known); a row
-    /// along z at a time.
-    void gather(const std::array<int, 27>& around, const int* seedOf)
+    /// along z at a time. Only the parts next to a voxel of @a front (the voxels nearest() will
+    /// be asked for) are filled: the others are never read. Filling all (the 1000 entries
+    /// cleared, then every part copied) took 48 to 60 million cycles of the layers' 195 to 285
+    /// on the radius-400 pair at p = 320 (13,437 leaves, summed over the layers and inputs);
+    /// this, 28 to 40.
+    void gather(const std::array<int, 27>& around, const int* seedOf, const MaskBits& front)
     {
-        std::fill(std::begin(seed), std::end(seed), -1);
+        using Word = std::uint64_t;
         constexpr int kLast = kLeafDim - 1;
+        // front's voxels on each face of the leaf, as words: x = 0 and 7 (whole words), y = 0
+        // and 7 (a row of each word), z = 0 and 7 (a bit of each row).
+        constexpr Word kRowFirst = 0xFFull, kRowLast = kRowFirst << 56;
+        constexpr Word kBitFirst = 0x0101010101010101ull, kBitLast = kBitFirst << 7;
         for (int dx = -1; dx <= 1; ++dx) {
             for (int dy = -1; dy <= 1; ++dy) {
                 for (int dz = -1; dz <= 1; ++dz) {
+                    // Is a voxel of front next to this part?
+                    const Word rows = dy < 0 ? kRowFirst : dy > 0 ? kRowLast : ~Word(0);
+                    const Word bits = dz < 0 ? kBitFirst : dz > 0 ? kBitLast : ~Word(0);
+                    Word any = 0;
+                    for (int x = dx > 0 ? kLast : 0; x <= (dx < 0 ? 0 : kLast); ++x) {
+                        any |= front.getWord<Word>(openvdb::Index(x)) & rows & bits;
+                    }
+                    if (!any) continue;
                     const int leaf = around[LeafSet::aroundIndex(Coord(dx, dy, dz))];
-                    if (leaf < 0) continue;
-                    const int* from = seedOf + size_t(leaf) * LeafT::SIZE;
+                    const int* from = leaf < 0 ? nullptr : seedOf + size_t(leaf) * LeafT::SIZE;
                     // The part of that leaf within the shell: all of it along an axis where
                     // it is the leaf itself, else its last or first slice.
                     const int x0 = dx < 0 ? kLast : 0, x1 = dx > 0 ? 0 : kLast;
@@ -291,9 +313,13 @@ struct SeedNeighbourhood
                     const int z0 = dz < 0 ? kLast : 0, z1 = dz > 0 ? 0 : kLast;
                     for (int x = x0; x <= x1; ++x) {
                         for (int y = y0; y <= y1; ++y) {
-                            const int* row = from + LeafT::coordToOffset(Coord(x, y, z0));
                             int* to = seed + index(x + dx * kLeafDim, y + dy * kLeafDim,
                                                    z0 + dz * kLeafDim);
+                            if (!from) {
+                                std::fill(to, to + (z1 - z0 + 1), -1);
+                                continue;
+                            }
+                            const int* row = from + LeafT::coordToOffset(Coord(x, y, z0));
                             for (int z = 0; z <= z1 - z0; ++z) to[z] = row[z];
                         }
                     }
@@ -333,38 +359,6 @@ float planeValue(const openvdb::Vec3d& y, const Seeds& seeds, int k, double best
     const double sign = inputValue < 0.0f ? -1.0 : 1.0;
     return float(sign * std::abs(d) * dx);
 }
-
-/// activeWithin()'s view of masks held by leaf of a LeafSet (@a masks), around leaf @a k: the
-/// leaves it probes, by their origins.
-class MasksAround
-{
-public:
-    struct Leaf
-    {
-        const MaskBits* mask = nullptr;
-        const MaskBits& getValueMask() const { return *mask; }
-    };
-
-    MasksAround(const LeafSet& leaves, const std::vector<MaskBits>& masks, size_t k)
-        : mOrigin(leaves.origin[k])
-    {
-        for (size_t j = 0; j < 27; ++j) {
-            const int at = leaves.around[k][j];
-            mLeaf[j].mask = at >= 0 ? &masks[size_t(at)] : nullptr;
-        }
-    }
-
-    const Leaf* probeConstLeaf(const Coord& origin) const
-    {
-        const Leaf& l = mLeaf[LeafSet::aroundIndex((origin - mOrigin) >> kLeafLog2)];
-        return l.mask ? &l : nullptr;
-    }
-    bool isValueOn(const Coord&) const { return false; } // no tiles
-
-private:
-    Coord mOrigin;
-    Leaf mLeaf[27];
-};
 
 /// An input's band grown over a LeafSet by closest points (extendOverLeaves()): by
 /// leaf * 512 + voxel offset, each known voxel's seed (-1: not known) and value.
@@ -461,11 +455,14 @@ FlatBand extendOverLeaves(const openvdb::FloatGrid& grid, const LeafSet& leaves,
                 const LeafT* sign = in.probeConstLeaf(origin);
                 const float tile = sign ? 0.0f : in.getValue(origin);
                 // Of keep's voxels not known yet, those with a known neighbour.
-                MasksAround known(leaves, b.known, k);
-                const MaskBits front =
-                    b.keep[k] & !b.known[k] & detail::activeWithinOf<1>(origin, known);
+                const MaskBits* known[27];
+                for (size_t j = 0; j < 27; ++j) {
+                    const int at = leaves.around[k][j];
+                    known[j] = at >= 0 ? &b.known[size_t(at)] : nullptr;
+                }
+                const MaskBits front = b.keep[k] & !b.known[k] & detail::withinOne(known);
                 if (front.isOff()) continue;
-                nb->gather(leaves.around[k], b.seedOf.get());
+                nb->gather(leaves.around[k], b.seedOf.get(), front);
                 for (auto it = front.beginOn(); it; ++it) {
                     const openvdb::Index m = it.pos();
                     const Coord local = LeafT::offsetToLocalCoord(m);
@@ -535,7 +532,7 @@ openvdb::FloatGrid::Ptr extendBySweeping(const openvdb::FloatGrid& grid, const M
     openvdb::tree::ValueAccessor<const FloatTree> acc(grid.tree());
     openvdb::tree::ValueAccessor<const MaskTree> keepAcc(keep);
     // The leaves the grown band can reach (new voxels take their sign from there).
-    const MaskTree::Ptr around = leafMask(*dilatedCopy(keep, dilation + 1));
+    const SmallMaskTree::Ptr around = leafMask(*dilatedCopy(keep, dilation + 1));
     for (const Coord& o : leafOrigins(*around)) {
         if (const LeafT* leaf = acc.probeConstLeaf(o)) {
             auto* copy = new LeafT(*leaf);
@@ -583,7 +580,7 @@ struct BlendPlan
     size_t n = 0;
     int needVox = 0;
     std::vector<int> dilation;           // voxels each input's band must grow
-    std::vector<MaskTree::Ptr> leaves;   // each input's leaves, as a coarse mask
+    std::vector<SmallMaskTree::Ptr> leaves; // each input's leaves, as a coarse mask
 
     /// How far (voxels) around the crease the fast-sweeping re-distancing reads the surface: a
     /// band width and two voxels (the region).
@@ -613,7 +610,7 @@ struct BlendPlan
     /// The sweep keeps a few copies of the grown band (values, masks, slices): about 16 bytes a
     /// voxel. A bound: the leaves of @a mask grown by @a d voxels, or its bounding box so grown,
     /// whichever is smaller.
-    static double grownBytes(const MaskTree& mask, int d)
+    static double grownBytes(const SmallMaskTree& mask, int d)
     {
         openvdb::CoordBBox box;
         mask.evalActiveVoxelBoundingBox(box);
@@ -631,7 +628,7 @@ struct BlendPlan
     }
 
     /// Refuse now if growing the masks @a grownFrom by each input's dilation would not fit.
-    void checkMemory(const std::vector<MaskTree::Ptr>& grownFrom) const
+    void checkMemory(const std::vector<SmallMaskTree::Ptr>& grownFrom) const
     {
         double estimate = 0.0;
         for (size_t i = 0; i < n; ++i) estimate += grownBytes(*grownFrom[i], dilation[i]);
@@ -681,12 +678,13 @@ BlendPlan planBlend(const std::vector<openvdb::FloatGrid::Ptr>& grids, const Ble
 }
 
 /// The voxels in two or more of @a masks.
-MaskTree::Ptr pairwise(const std::vector<MaskTree::Ptr>& masks)
+template<typename TreeT>
+typename TreeT::Ptr pairwise(const std::vector<typename TreeT::Ptr>& masks)
 {
-    auto out = std::make_shared<MaskTree>();
+    auto out = std::make_shared<TreeT>();
     for (size_t i = 0; i < masks.size(); ++i) {
         for (size_t j = i + 1; j < masks.size(); ++j) {
-            MaskTree both(*masks[i]);
+            TreeT both(*masks[i]);
             both.topologyIntersection(*masks[j]);
             out->topologyUnion(both);
         }
@@ -713,13 +711,13 @@ MaskBits inTwoOrMore(const std::vector<std::vector<MaskBits>>& masks, size_t k)
 /// crease is found) took 3.96 s against 2.16.
 MaskTree::Ptr creaseOnTrees(const BlendPlan& plan,
                             const std::vector<openvdb::FloatGrid::Ptr>& grids,
-                            const MaskTree& candidates)
+                            const SmallMaskTree& candidates)
 {
     std::vector<MaskTree::Ptr> reach(plan.n);
     tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
         auto band = std::make_shared<MaskTree>();
         InputAccessor acc(grids[i]->tree());
-        const MaskTree::Ptr near = dilatedCopy(candidates, leavesFor(plan.dilation[i]));
+        const SmallMaskTree::Ptr near = dilatedCopy(candidates, leavesFor(plan.dilation[i]));
         for (const Coord& o : leafOrigins(*near)) {
             if (const LeafT* leaf = acc.probeConstLeaf(o)) {
                 band->touchLeaf(o)->setValueMask(leaf->getValueMask());
@@ -727,7 +725,7 @@ MaskTree::Ptr creaseOnTrees(const BlendPlan& plan,
         }
         reach[i] = dilatedCopy(*band, plan.dilation[i]);
     });
-    return pairwise(reach);
+    return pairwise<MaskTree>(reach);
 }
 
 /// findCrease()'s flat arrays (extensions of up to a leaf), kept for blendDomain(): the
@@ -737,6 +735,17 @@ struct FlatCrease
 {
     std::unique_ptr<LeafSet> leaves;
     std::vector<MaskBits> crease, bands;
+
+    /// The crease as a tree.
+    MaskTree::Ptr creaseTree() const
+    {
+        auto out = std::make_shared<MaskTree>();
+        openvdb::tree::ValueAccessor<MaskTree> acc(*out);
+        for (size_t k = 0; k < crease.size(); ++k) {
+            if (!crease[k].isOff()) acc.touchLeaf(leaves->origin[k])->setValueMask(crease[k]);
+        }
+        return out;
+    }
 };
 
 /// Step 2, the crease: where the blend differs from the sharp operation by more than the
@@ -745,17 +754,19 @@ struct FlatCrease
 /// those leaves: each input's band grown by its extension and intersected. For extensions of
 /// up to a leaf (those of localBlend()), on flat arrays over the leaves within the longest
 /// extension of a candidate (all that reaches a candidate's voxels), kept in @a flat; for
-/// longer ones, on trees (@a flat left empty).
+/// longer ones, on trees (@a flat left empty). Returns the crease as a tree for longer
+/// extensions (null with the flat arrays: the tree is built where it is asked for, which
+/// localBlend() does not).
 MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::FloatGrid::Ptr>& grids,
                          FlatCrease& flat)
 {
     // Each input's leaf masks by one thread: a dilation is serial, and the inputs are
     // independent.
-    std::vector<MaskTree::Ptr> reach(plan.n);
+    std::vector<SmallMaskTree::Ptr> reach(plan.n);
     tbb::parallel_for(size_t(0), plan.n, [&](size_t i) {
         reach[i] = dilatedCopy(*plan.leaves[i], leavesFor(plan.dilation[i]));
     });
-    const MaskTree::Ptr candidates = pairwise(reach);
+    const SmallMaskTree::Ptr candidates = pairwise<SmallMaskTree>(reach);
     const int longest = *std::max_element(plan.dilation.begin(), plan.dilation.end());
     if (longest > kLeafDim) return creaseOnTrees(plan, grids, *candidates);
     // At least a leaf around them, which blendDomain() reads too.
@@ -794,12 +805,7 @@ MaskTree::Ptr findCrease(const BlendPlan& plan, const std::vector<openvdb::Float
             }
         }
     });
-    auto crease = std::make_shared<MaskTree>();
-    openvdb::tree::ValueAccessor<MaskTree> acc(*crease);
-    for (size_t k = 0; k < count; ++k) {
-        if (!flat.crease[k].isOff()) acc.touchLeaf(leaves.origin[k])->setValueMask(flat.crease[k]);
-    }
-    return crease;
+    return nullptr;
 }
 
 /// The sign of input @a i's term in union form: an intersection is the union of the
@@ -930,7 +936,8 @@ std::vector<GrownBand> growBands(const BlendPlan& plan,
                                  const MaskTree& crease, util::Interrupter* interrupter)
 {
     std::map<int, MaskTree::Ptr> byReach; // the inputs' reaches are often the same
-    std::vector<MaskTree::Ptr> keep(plan.n), keepLeaves(plan.n);
+    std::vector<MaskTree::Ptr> keep(plan.n);
+    std::vector<SmallMaskTree::Ptr> keepLeaves(plan.n);
     for (size_t i = 0; i < plan.n; ++i) {
         const int reach = keepReach(plan, i);
         MaskTree::Ptr& k = byReach[reach];
@@ -1475,17 +1482,17 @@ std::vector<BlendSplice> spliceLeaves(const BlendedValues& b, const openvdb::Flo
     return out;
 }
 
-std::string blendNote(const BlendPlan& plan, bool hasCrease, const MaskTree& crease)
+std::string blendNote(const BlendPlan& plan, std::uint64_t creaseVoxels)
 {
     std::ostringstream os;
-    if (!hasCrease) {
+    if (creaseVoxels == 0) {
         os << "the inputs do not come within the blend's reach of each other ("
            << plan.kernel.describe() << "): the result is the sharp operation";
     } else {
         os << "bands extended to " << plan.needVox << " voxels where the inputs meet, for "
            << plan.kernel.describe() << " (reach "
            << util::formatNumber(std::round(plan.reachVox * 10) / 10) << " voxels; "
-           << util::formatNumber(double(crease.activeVoxelCount()))
+           << util::formatNumber(double(creaseVoxels))
            << " voxels around the crease checked)";
     }
     return os.str();
@@ -1539,15 +1546,31 @@ struct BlendCrease::Impl
 {
     BlendSettings settings;
     BlendPlan plan;
-    MaskTree::Ptr crease;
     FlatCrease flat; // the crease's flat arrays, for extensions of up to a leaf
+    std::uint64_t creaseVoxels = 0;
+
+    /// The crease as a tree: findCrease()'s, or built from the flat arrays on first use (3 ms
+    /// on the radius-400 pair, which localBlend() does without).
+    const MaskTree& crease() const
+    {
+        std::call_once(mBuilt, [this] {
+            if (!mCrease) mCrease = flat.creaseTree();
+        });
+        return *mCrease;
+    }
+
+    void setCrease(MaskTree::Ptr tree) { mCrease = std::move(tree); }
 
     /// The crease's fast-sweeping re-distancing (when the blend of two planes does not apply)
     /// reads the surface within a band width of it: the region it writes.
     MaskTree::Ptr region() const
     {
-        return dilatedCopy(*crease, plan.regionReach());
+        return dilatedCopy(crease(), plan.regionReach());
     }
+
+private:
+    mutable std::once_flag mBuilt;
+    mutable MaskTree::Ptr mCrease;
 };
 
 BlendCrease::BlendCrease(const std::vector<openvdb::FloatGrid::Ptr>& grids,
@@ -1558,24 +1581,29 @@ BlendCrease::BlendCrease(const std::vector<openvdb::FloatGrid::Ptr>& grids,
     Impl& m = *mImpl;
     m.settings = settings;
     m.plan = planBlend(grids, settings);
-    m.crease = findCrease(m.plan, grids, m.flat);
+    m.setCrease(findCrease(m.plan, grids, m.flat));
+    if (m.flat.leaves) {
+        for (const MaskBits& bits : m.flat.crease) m.creaseVoxels += bits.countOn();
+    } else {
+        m.creaseVoxels = m.crease().activeVoxelCount();
+    }
     util::checkInterrupt(settings.interrupter);
 }
 
 BlendCrease::~BlendCrease() = default;
 
-bool BlendCrease::empty() const { return mImpl->crease->activeVoxelCount() == 0; }
+bool BlendCrease::empty() const { return mImpl->creaseVoxels == 0; }
 
 std::string BlendCrease::note() const
 {
-    return blendNote(mImpl->plan, !empty(), *mImpl->crease);
+    return blendNote(mImpl->plan, mImpl->creaseVoxels);
 }
 
 std::vector<Coord> BlendCrease::leavesRead(size_t input) const
 {
     const Impl& m = *mImpl;
     if (empty()) return {};
-    return leafOrigins(*leafMask(*dilatedCopy(*m.crease, readReach(m.plan, input))));
+    return leafOrigins(*leafMask(*dilatedCopy(m.crease(), readReach(m.plan, input))));
 }
 
 std::vector<Coord> BlendCrease::leavesWritten() const
@@ -1604,7 +1632,7 @@ std::vector<BlendSplice> BlendCrease::compute(CsgOp op,
     }
     // Where it does not apply: the blend's values over the region, with every band grown over
     // it, re-distanced.
-    const std::vector<GrownBand> grown = growBands(m.plan, grids, *m.crease, interrupter);
+    const std::vector<GrownBand> grown = growBands(m.plan, grids, m.crease(), interrupter);
     BlendedValues blended = blendValues(op, m.plan, m.settings, grids, grown, *m.region(),
                                         finestInput(grids).transform());
     const openvdb::FloatGrid::Ptr redistanced = redistanceBlend(blended, m.plan, interrupter);
