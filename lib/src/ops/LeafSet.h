@@ -163,7 +163,7 @@ inline MaskBits spreadAlong(int axis, int s, const MaskBits& w, const MaskBits* 
                 o |= (o << (8 * t)) | (o >> (8 * t));
                 c += t;
             }
-            Word l = u < 64 ? word(lo, x) >> u : 0, h = u < 64 ? word(hi, x) << u : 0;
+            Word l = word(lo, x) >> u, h = word(hi, x) << u;
             l |= l >> 8, l |= l >> 16, l |= l >> 32; // each row to the rows below it
             h |= h << 8, h |= h << 16, h |= h << 32; // and above
             out.getWord<Word>(openvdb::Index(x)) = o | l | h;
