@@ -35,6 +35,10 @@
 #include <sstream>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace ivdb::ops {
 
 namespace {
@@ -112,6 +116,23 @@ std::vector<Coord> leafOrigins(const SmallMaskTree& mask)
 {
     std::vector<Coord> out;
     out.reserve(size_t(mask.activeVoxelCount()));
+    if (!mask.hasActiveTiles()) {
+        // Leaf by leaf, a word of the mask at a time, in the value iterator's order (below):
+        // the 27,249 leaves around the radius-400 pair's crease in 0.1 to 0.2 ms, not 0.9.
+        for (auto leaf = mask.cbeginLeaf(); leaf; ++leaf) {
+            const Coord base = leaf->origin();
+            const auto& bits = leaf->getValueMask();
+            for (openvdb::Index w = 0; w < bits.WORD_COUNT; ++w) {
+                for (std::uint64_t word = bits.template getWord<std::uint64_t>(w); word;
+                     word &= word - 1) {
+                    const openvdb::Index i = 64 * w + openvdb::util::FindLowestOn(word);
+                    const Coord v = base + SmallMaskTree::LeafNodeType::offsetToLocalCoord(i);
+                    out.emplace_back(v.x() * kLeafDim, v.y() * kLeafDim, v.z() * kLeafDim);
+                }
+            }
+        }
+        return out;
+    }
     for (auto it = mask.cbeginValueOn(); it; ++it) {
         const openvdb::CoordBBox box = it.getBoundingBox(); // a voxel, or a tile of them
         // Multiplied, not shifted: shifting a negative coordinate left is undefined in C++17.
@@ -842,10 +863,21 @@ MaskBits beyondOf(const LeafT& leaf, double side)
     const float* v = leaf.buffer().data();
     for (openvdb::Index w = 0; w < MaskBits::WORD_COUNT; ++w) {
         std::uint64_t negative = 0;
-        for (int b = 0; b < 64; ++b) {
-            const float x = v[64 * w + b];
-            negative |= std::uint64_t(side > 0.0 ? x < 0.0f : x > 0.0f) << b;
+        const float* x = v + 64 * w;
+#if defined(__SSE2__)
+        // Four values a comparison: on the radius-400 pair, the voxels to blend took 1.2 to 1.5
+        // ms to find this way, 2.0 to 2.6 one value at a time (temporary timers, p = 1000).
+        const __m128 zero = _mm_setzero_ps();
+        for (int b = 0; b < 64; b += 4) {
+            const __m128 four = _mm_loadu_ps(x + b);
+            const __m128 beyond = side > 0.0 ? _mm_cmplt_ps(four, zero) : _mm_cmpgt_ps(four, zero);
+            negative |= std::uint64_t(unsigned(_mm_movemask_ps(beyond))) << b;
         }
+#else
+        for (int b = 0; b < 64; ++b) {
+            negative |= std::uint64_t(side > 0.0 ? x[b] < 0.0f : x[b] > 0.0f) << b;
+        }
+#endif
         out.getWord<std::uint64_t>(w) = negative & ~leaf.getValueMask().getWord<std::uint64_t>(w);
     }
     return out;

@@ -48,23 +48,58 @@ public:
     explicit LeafSet(std::vector<Coord> origins, Around neighbours = Around::All)
         : origin(std::move(origins)), mIndex(-1)
     {
-        openvdb::tree::ValueAccessor<IndexTree> index(mIndex);
-        for (std::size_t k = 0; k < origin.size(); ++k) {
-            index.setValueOn(origin[k] >> kLog2, int(k));
+        {
+            openvdb::tree::ValueAccessor<IndexTree> index(mIndex);
+            for (std::size_t k = 0; k < origin.size(); ++k) {
+                index.setValueOn(origin[k] >> kLog2, int(k));
+            }
         }
         around.resize(origin.size());
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, origin.size()),
+        // By leaf of the index (8^3 of the set's leaves), with the 26 index leaves around it at
+        // hand. Asked for each leaf's neighbours, an accessor traded its cached leaf whenever one
+        // lay across an index leaf's face (more than half of the set's leaves have one): with
+        // it, listing the 27,249 leaves around the radius-400 pair's crease took 3.3 ms, now
+        // 1.7 to 2.2 (temporary timers).
+        using IndexLeaf = IndexTree::LeafNodeType;
+        constexpr int kIndexDim = int(IndexLeaf::DIM);
+        std::vector<const IndexLeaf*> indexLeaves;
+        mIndex.getNodes(indexLeaves);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, indexLeaves.size()),
                           [&](const tbb::blocked_range<std::size_t>& r) {
             IndexAccessor acc(mIndex);
-            for (std::size_t k = r.begin(); k < r.end(); ++k) {
-                const Coord c = origin[k] >> kLog2;
+            for (std::size_t l = r.begin(); l < r.end(); ++l) {
+                const IndexLeaf& leaf = *indexLeaves[l];
+                const IndexLeaf* near[27];
                 for (int dx = -1; dx <= 1; ++dx) {
                     for (int dy = -1; dy <= 1; ++dy) {
                         for (int dz = -1; dz <= 1; ++dz) {
-                            const Coord d(dx, dy, dz);
-                            const bool face = std::abs(dx) + std::abs(dy) + std::abs(dz) <= 1;
-                            around[k][aroundIndex(d)] =
-                                neighbours == Around::All || face ? acc.getValue(c + d) : -1;
+                            near[aroundIndex(Coord(dx, dy, dz))] = acc.probeConstLeaf(
+                                leaf.origin().offsetBy(dx * kIndexDim, dy * kIndexDim,
+                                                       dz * kIndexDim));
+                        }
+                    }
+                }
+                // Which index leaf (-1, 0, 1 along an axis) holds a local coordinate of -1..8.
+                const auto side = [](int v) { return v < 0 ? -1 : v >= kIndexDim ? 1 : 0; };
+                for (auto it = leaf.cbeginValueOn(); it; ++it) {
+                    const std::size_t k = std::size_t(*it);
+                    const Coord local = IndexLeaf::offsetToLocalCoord(it.pos());
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        for (int dy = -1; dy <= 1; ++dy) {
+                            for (int dz = -1; dz <= 1; ++dz) {
+                                const Coord d(dx, dy, dz);
+                                const bool face = std::abs(dx) + std::abs(dy) + std::abs(dz) <= 1;
+                                int& to = around[k][aroundIndex(d)];
+                                to = -1; // no leaf there (an index leaf's inactive voxels too)
+                                if (neighbours != Around::All && !face) continue;
+                                const Coord q = local + d;
+                                const Coord w(side(q.x()), side(q.y()), side(q.z()));
+                                if (const IndexLeaf* n = near[aroundIndex(w)]) {
+                                    to = n->getValue(IndexLeaf::coordToOffset(
+                                        q.offsetBy(-w.x() * kIndexDim, -w.y() * kIndexDim,
+                                                   -w.z() * kIndexDim)));
+                                }
+                            }
                         }
                     }
                 }
