@@ -117,8 +117,9 @@ std::vector<Coord> leafOrigins(const SmallMaskTree& mask)
     std::vector<Coord> out;
     out.reserve(size_t(mask.activeVoxelCount()));
     if (!mask.hasActiveTiles()) {
-        // Leaf by leaf, a word of the mask at a time, in the value iterator's order (below):
-        // the 27,249 leaves around the radius-400 pair's crease in 0.1 to 0.2 ms, not 0.9.
+        // Leaf by leaf, a word of the mask at a time, in the value iterator's order: the 27,249
+        // leaves around the radius-400 pair's crease in 0.1 to 0.2 ms, not 0.9. (leafMask(),
+        // dilatedBox() and pairwise() make no tiles; a mask with tiles is read below.)
         for (auto leaf = mask.cbeginLeaf(); leaf; ++leaf) {
             const Coord base = leaf->origin();
             const auto& bits = leaf->getValueMask();
@@ -865,8 +866,9 @@ MaskBits beyondOf(const LeafT& leaf, double side)
         std::uint64_t negative = 0;
         const float* x = v + 64 * w;
 #if defined(__SSE2__)
-        // Four values a comparison: on the radius-400 pair, the voxels to blend took 1.2 to 1.5
-        // ms to find this way, 2.0 to 2.6 one value at a time (temporary timers, p = 1000).
+        // Four values a comparison: on the radius-400 pair, the voxels to blend took 1.3 to 1.5
+        // ms to find this way, 2.5 to 2.6 one value at a time (temporary timers, medians of five
+        // runs, p = 1000).
         const __m128 zero = _mm_setzero_ps();
         for (int b = 0; b < 64; b += 4) {
             const __m128 four = _mm_loadu_ps(x + b);
