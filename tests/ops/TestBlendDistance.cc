@@ -204,3 +204,51 @@ TEST(TestBlendDistance, FirstOrderEstimateIsTheBlendOverItsGradient)
                 "from the nearest point; restarted at its answer, the iteration moves by up to "
                 "%.1e\n", checked, worstFoot, worstRestart);
 }
+
+// The grid blend's short cut inside (lib/src/ops/Blend.cc, localBlend()): from a point s inside
+// the deciding plane a, where the other term at a's nearest point, b*, still leads by the lead
+// rule's margin (the reach at the default tolerance of 0.05 voxel, the swell and a voxel), the
+// distance is -s less blendOffset(b*). Against the distance to the blend of the two planes
+// (above: within 1e-6 of the rays' search), and blendOffset() against the blend's formula.
+TEST(TestBlendDistance, InsideWhereOneTermWeighsAllTheOffsetIsTheDistance)
+{
+    UnionKernel kernels[5];
+    const double ps[3] = {0.8, 2.5, 6.0}; // p = 320 and 1000 on the benchmarks' voxel, and sharper
+    const double ks[2] = {1.0, 4.0};
+    for (int i = 0; i < 3; ++i) kernels[i].p = ps[i];
+    for (int i = 0; i < 2; ++i) {
+        kernels[3 + i].polynomial = true;
+        kernels[3 + i].k = ks[i];
+    }
+    int checked = 0;
+    double worst = 0.0;
+    for (const UnionKernel& k : kernels) {
+        const double lead = k.polynomial
+            ? k.k + k.k / 4.0 + 1.0
+            : std::log(1.0 / (k.p * 0.05)) / k.p + std::log(2.0) / k.p + 1.0;
+        for (const double degrees : {15.0, 50.0, 90.0, 130.0}) {
+            const double c = std::cos(degrees * kPi / 180.0);
+            for (double s = 0.25; s <= 3.01; s += 0.25) {
+                for (double bStar = lead; bStar <= lead + 3.01; bStar += 0.5) {
+                    const double offset = blendOffset(k, bStar);
+                    // The blend's surface: U(offset, b*) = 0.
+                    ASSERT_NEAR(unionBlend(k, offset, bStar), 0.0, 1e-14) << bStar;
+                    const double b = bStar - s * c; // b at x, s from a's surface
+                    const PlaneBlendDistance d = planeBlendDistance(k, -s, b, c);
+                    ASSERT_TRUE(d.ok);
+                    const double shortCut = -s - offset;
+                    worst = std::max(worst, std::abs(shortCut - d.distance));
+                    ASSERT_NEAR(shortCut, d.distance, 2e-4)
+                        << (k.polynomial ? "k " : "p ") << (k.polynomial ? k.k : k.p) << ", "
+                        << degrees << " degrees, s " << s << ", b* " << bStar;
+                    ++checked;
+                }
+            }
+        }
+        // A spot check against the rays themselves, at the rule's edge: s = 2, 60 degrees.
+        const double rays = BruteForce(k, kPi / 3.0, -2.0, lead - 2.0 * 0.5).distance();
+        EXPECT_NEAR(-2.0 - blendOffset(k, lead), rays, 2e-4);
+    }
+    EXPECT_EQ(checked, 5 * 4 * 12 * 7);
+    std::printf("%d points; the short cut is within %.1e of the distance\n", checked, worst);
+}

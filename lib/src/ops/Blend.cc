@@ -1225,6 +1225,19 @@ double cycleDistance(const double* phi, const double* w, int n, double ownA, dou
     return 0.5 * (*lo + *hi);
 }
 
+/// The voxel nearest @a y (index space), as openvdb::Coord::round() gives it: floor(y + 0.5)
+/// each, without the library call that floor() is where the target lacks SSE4.1's roundsd
+/// (a blended voxel asks two or three times). @a y within the int range.
+inline Coord nearestVoxel(const openvdb::Vec3d& y)
+{
+    auto down = [](double v) {
+        const double t = v + 0.5;
+        const int i = int(t); // toward zero
+        return i - int(t < double(i));
+    };
+    return Coord(down(y.x()), down(y.y()), down(y.z()));
+}
+
 /// Step 4 and 5 at once, locally: the blended voxels' distances found voxel by voxel from the
 /// closest-point extension's planes, instead of the blend's values re-distanced by fast
 /// sweeping (docs/method.md#grid-blend).
@@ -1242,6 +1255,10 @@ double cycleDistance(const double* phi, const double* w, int n, double ownA, dou
 /// order in the voxel: against the exact distance to the blend of two spheres of radius 60
 /// voxels, within 0.006 voxel where fast sweeping was up to 0.026 to 0.047 voxel off
 /// (TestBlendGrid.CreaseVoxelsAreTheDistanceToTheBlendedSurface).
+///
+/// Inside, where the lead rule's bound on the lead's fall to the nearest point alone sends a voxel
+/// here, the next term is read at that point instead, and where it still leads, the distance is
+/// the deciding term's less the blend's offset there (detail::blendOffset()): no minimization.
 ///
 /// Returns nothing (and the caller re-distances by fast sweeping) where this does not apply: a
 /// third term within reach, two planes facing each other (a gap the blend bridges), or
@@ -1279,11 +1296,10 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
             openvdb::Vec3d c, m;
             int seed = -1; // the seed it comes from
         };
-        auto planeAt = [&](size_t i, const Coord& ijk, Plane& p) { // false: p unchanged
-            const int at = leaves.find(ijk, leaf, index);
-            if (at < 0) return false;
+        // Term i's plane at voxel v of leaves (leaf * 512 + offset). False: p unchanged.
+        auto planeOf = [&](size_t i, size_t v, Plane& p) {
             const FlatBand& band = bands.band[i];
-            const int k = band.seedOf[size_t(at) * LeafT::SIZE + LeafT::coordToOffset(ijk)];
+            const int k = band.seedOf[v];
             if (k < 0) return false; // not reached
             const Seeds& seeds = band.seeds;
             const openvdb::Vec3d m = termSign(op, i) * openvdb::Vec3d(seeds.normal[size_t(k)]);
@@ -1293,6 +1309,20 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
             p.seed = k;
             return true;
         };
+        auto planeAt = [&](size_t i, const Coord& ijk, Plane& p) { // false: p unchanged
+            const int at = leaves.find(ijk, leaf, index);
+            return at >= 0 && planeOf(i, size_t(at) * LeafT::SIZE + LeafT::coordToOffset(ijk), p);
+        };
+        // Terms i1's and i2's planes at @a ijk, the voxel found once for both: true if both
+        // are there (each unchanged where it has none).
+        auto planesAt = [&](size_t i1, size_t i2, const Coord& ijk, Plane& pa, Plane& pb) {
+            const int at = leaves.find(ijk, leaf, index);
+            if (at < 0) return false;
+            const size_t v = size_t(at) * LeafT::SIZE + LeafT::coordToOffset(ijk);
+            const bool a = planeOf(i1, v, pa);
+            const bool b = planeOf(i2, v, pb);
+            return a && b;
+        };
         BlendSplice s;
         for (size_t k = r.begin(); k < r.end() && !failed; ++k) {
             s = BlendSplice{};
@@ -1301,6 +1331,17 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
             leaf = leaves.find(o, -1, index);
             terms.seek(o, bands, leaf);
             LeafT::NodeMaskType marked, active;
+            // A blended voxel's distance: active within the band, beyond it the background by
+            // its sign.
+            auto put = [&](openvdb::Index m, float value) {
+                marked.setOn(m);
+                if (std::abs(value) < bg) {
+                    s.values[m] = value;
+                    active.setOn(m);
+                } else {
+                    s.values[m] = value > 0.0f ? bg : -bg;
+                }
+            };
             for (auto it = domain.blend[k].beginOn(); it; ++it) {
                 const openvdb::Index m = it.pos();
                 terms.read(m);
@@ -1322,8 +1363,30 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                 const double least = u(i1);
                 if (least - swell >= bg || least <= -bg) continue;
                 const Coord ijk = o + LeafT::offsetToLocalCoord(m);
+                // Inside, where only the lead rule's 2|s| sends the voxel here (its bound on how
+                // far the lead falls on the way to the nearest point y, |s| away, both terms
+                // 1-Lipschitz): read the next term at y (the deciding term's foot point, from its
+                // plane) from the plane of y's voxel; between planes the lead falls by
+                // |s| (1 - n1 . n2). If it still leads by the rule's margin, only one term weighs
+                // near y: the blended surface is the deciding one moved out by blendOffset(), and
+                // the distance is s less that (no other point of the blended surface is nearer:
+                // the blended solid holds the sharp one, and the ball of radius |s| about x lies
+                // in it). Within 2e-4 voxel of the minimization's planes (TestBlendDistance), and
+                // nearer the exact surface on spheres (docs/performance.md#csg-and-blends).
+                if (least < 0.0 && u(i2) - least >= lead) {
+                    Plane pf, pn;
+                    if (planeAt(i1, ijk, pf) && planeAt(i2, nearestVoxel(pf.c), pn)) {
+                        const double next = pn.m.dot(pf.c - pn.c); // voxels
+                        if (next * plan.dx >= lead) {
+                            const double offset = detail::blendOffset(kernel, next);
+                            if (offset == 0.0) continue; // the sharp value (a smooth minimum)
+                            put(m, float(sign * (least - offset * plan.dx)));
+                            continue;
+                        }
+                    }
+                }
                 Plane pa, pb;
-                const bool planes = planeAt(i1, ijk, pa) && planeAt(i2, ijk, pb);
+                const bool planes = planesAt(i1, i2, ijk, pa, pb);
                 const openvdb::Vec3d x(ijk.x(), ijk.y(), ijk.z());
                 // Each term's own distance at x: what the blend is where one term weighs all.
                 const double ownA = pa.m.dot(x - pa.c), ownB = pb.m.dot(x - pb.c);
@@ -1354,10 +1417,9 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                     const openvdb::Vec3d g = e.weight * pa.m + (1.0 - e.weight) * pb.m;
                     const double len = g.length();
                     if (e.ok && len > 1e-6) {
-                        const Coord at = openvdb::Coord::round(x - (e.distance / len) * g);
+                        const Coord at = nearestVoxel(x - (e.distance / len) * g);
                         if (at != asked) { // x's own planes again, where the foot is nearest x
-                            planeAt(i1, at, pa);
-                            planeAt(i2, at, pb);
+                            planesAt(i1, i2, at, pa, pb);
                             asked = at;
                         }
                     }
@@ -1402,14 +1464,13 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                     // The planes of the voxel nearest y (the old ones where it has none); the
                     // same planes again (often: a seed passes along its normal) give the same
                     // distance, and the voxel asked last gives them with nothing to read.
-                    const Coord at = openvdb::Coord::round(x - (phi / len) * g);
+                    const Coord at = nearestVoxel(x - (phi / len) * g);
                     if (at == asked) {
                         settled = true;
                         continue;
                     }
                     const int seedA = pa.seed, seedB = pb.seed;
-                    planeAt(i1, at, pa);
-                    planeAt(i2, at, pb);
+                    planesAt(i1, i2, at, pa, pb);
                     asked = at;
                     if (pa.seed == seedA && pb.seed == seedB) settled = true;
                 }
@@ -1426,14 +1487,7 @@ std::optional<std::vector<BlendSplice>> localBlend(CsgOp op, const BlendPlan& pl
                     failed = true;
                     return;
                 }
-                const float value = float(sign * phi * plan.dx);
-                marked.setOn(m);
-                if (std::abs(value) < bg) {
-                    s.values[m] = value;
-                    active.setOn(m);
-                } else {
-                    s.values[m] = value > 0.0f ? bg : -bg;
-                }
+                put(m, float(sign * phi * plan.dx));
             }
             if (marked.isOff()) continue;
             for (int w = 0; w < BlendSplice::kWords; ++w) {

@@ -237,4 +237,10 @@ PlaneBlendDistance planeBlendDistance(const UnionKernel& kernel, double a, doubl
     return answer(kernel, support.minimize(t0), a, b);
 }
 
+double blendOffset(const UnionKernel& kernel, double b)
+{
+    if (kernel.polynomial) return 0.0;
+    return -std::log1p(-implicit::detail::expNonPositive(-kernel.p * std::max(b, 0.0))) / kernel.p;
+}
+
 } // namespace ivdb::ops::detail

@@ -63,4 +63,10 @@ PlaneBlendDistance planeBlendDistance(const UnionKernel& kernel, double a, doubl
 /// point lies.
 PlaneBlendDistance planeBlendEstimate(const UnionKernel& kernel, double a, double b, double c);
 
+/// @brief How far beyond plane a the blend's surface lies where the other term, @a b (voxels),
+/// is at least the kernel's reach (one term weighs nearly all there): U(delta, b) = 0, that is
+/// delta = -ln(1 - e^(-p b)) / p for the super-elliptic blend (about e^(-p b) / p), and 0 for
+/// the smooth minimum, whose reach is k (its flat part).
+double blendOffset(const UnionKernel& kernel, double b);
+
 } // namespace ivdb::ops::detail
