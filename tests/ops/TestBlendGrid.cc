@@ -8,6 +8,7 @@
 #include <ivdb/util/System.h>
 
 #include <openvdb/math/Operators.h>
+#include <openvdb/tools/ChangeBackground.h>
 #include <openvdb/tools/Interpolation.h>
 
 #include <gtest/gtest.h>
@@ -235,6 +236,42 @@ TEST_F(TestBlendGrid, EqualsSharpAwayFromTheCrease)
     EXPECT_GT(compared, 1000u);
 }
 
+// A band whose background is a hair under a whole number of voxels, as the rasterizer's float
+// background of 3 voxels of a double size is (0.03f / 0.01 = 2.99999993), is that many voxels
+// wide: the bands grow as far as for a background a hair over, and the blend is the same voxel for
+// voxel. Floored, 2.99999993 grew every band a layer more than the reach needs.
+TEST_F(TestBlendGrid, ABandAHairUnderWholeVoxelsIsThatWide)
+{
+    const double dx = 0.01;
+    auto a = sphere(Vec3d(-0.2, 0, 0), dx), b = sphere(Vec3d(0.2, 0, 0), dx);
+    auto over = [](const openvdb::FloatGrid::ConstPtr& g) {
+        openvdb::FloatGrid::Ptr copy = g->deepCopy();
+        openvdb::tools::changeLevelSetBackground(copy->tree(),
+                                                 std::nextafter(g->background(), 1.0f));
+        return openvdb::FloatGrid::ConstPtr(copy);
+    };
+    auto a2 = over(a), b2 = over(b);
+    ASSERT_LT(double(a->background()) / dx, 3.0);
+    ASSERT_GT(double(a2->background()) / dx, 3.0);
+    ops::BlendSettings s;
+    s.p = 100.0; // bands extended to 8 voxels: 5 layers beyond the band of 3
+    std::vector<std::string> under, above;
+    auto g = ops::blend(ops::CsgOp::Union, {a, b}, s, &under);
+    auto h = ops::blend(ops::CsgOp::Union, {a2, b2}, s, &above);
+    ASSERT_EQ(under.size(), 1u);
+    ASSERT_EQ(above.size(), 1u);
+    // "bands extended to 8 voxels ... (...; N voxels around the crease checked)": the same N.
+    EXPECT_NE(under[0].find("bands extended to 8 voxels"), std::string::npos) << under[0];
+    EXPECT_EQ(under[0], above[0]);
+    ASSERT_EQ(g->activeVoxelCount(), h->activeVoxelCount());
+    auto acc = h->getConstAccessor();
+    size_t differ = 0;
+    for (auto it = g->cbeginValueOn(); it; ++it) {
+        if (!acc.isValueOn(it.getCoord()) || acc.getValue(it.getCoord()) != *it) ++differ;
+    }
+    EXPECT_EQ(differ, 0u);
+}
+
 TEST_F(TestBlendGrid, RefusesWhatDoesNotFitAndBadSettings)
 {
     auto a = sphere(Vec3d(-0.35, 0, 0), 0.02), b = sphere(Vec3d(0.35, 0, 0), 0.02);
@@ -307,7 +344,9 @@ TEST_F(TestBlendGrid, CreaseVoxelsAreTheDistanceToTheBlendedSurface)
     const Case kCases[] = {{"union p = 100", ops::CsgOp::Union, 100.0, 0.0},
                            {"union p = 1000", ops::CsgOp::Union, 1000.0, 0.0},
                            {"intersection p = 100", ops::CsgOp::Intersection, 100.0, 0.0},
-                           {"smooth union k = 4 voxels", ops::CsgOp::Union, 0.0, 0.04}};
+                           {"smooth union k = 4 voxels", ops::CsgOp::Union, 0.0, 0.04},
+                           // An extension of exactly 8 voxels, the most grown by closest points.
+                           {"smooth union k = 5 voxels", ops::CsgOp::Union, 0.0, 0.05}};
 #endif
     for (const Case& cs : kCases) {
         ops::BlendSettings s;

@@ -698,8 +698,13 @@ BlendPlan planBlend(const std::vector<openvdb::FloatGrid::Ptr>& grids, const Ble
     // The swell of the blended surface too; see the lead rule in blendValues().
     plan.needVox = int(std::ceil(plan.halfWidth + plan.reachVox + swellVox)) + 1;
     for (const auto& g : grids) {
-        plan.dilation.push_back(
-            std::max(0, plan.needVox - int(std::floor(double(g->background()) / plan.dx))));
+        // The band's half width in whole voxels. A float background of 3 voxels of a double
+        // size is often a hair under 3 (0.03f / 0.01 = 2.99999993): floored as it was, that grew
+        // every band a layer more than the reach needs (7 at p = 320 on the radius-400 pair,
+        // where 6 reach 9 voxels): 13% more voxels grown and 14% more visited there, 32% and 23%
+        // at p = 1000 (4 layers for 3), and extensions of 8 voxels went to fast sweeping.
+        const int band = int(std::floor(double(g->background()) / plan.dx + 1e-6));
+        plan.dilation.push_back(std::max(0, plan.needVox - band));
         plan.leaves.push_back(leafMask(g->tree()));
     }
     plan.checkMemory(plan.leaves); // a first bound, before any mask is grown
